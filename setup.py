@@ -1,0 +1,40 @@
+"""ament_python package definition for helireach_ros (also installs with plain pip)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "helireach_ros"
+
+
+def _files(pattern: str) -> list[str]:
+    return sorted(path for path in glob(pattern, recursive=True) if not path.endswith("/"))
+
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "bench"]),
+    package_data={package_name: ["web/*"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", _files("config/*.yaml")),
+        ("share/" + package_name + "/config/airframes", _files("config/airframes/*.yaml")),
+        ("share/" + package_name + "/config/envelopes", _files("config/envelopes/*")),
+        ("share/" + package_name + "/config/scenarios", _files("config/scenarios/*.yaml")),
+        ("share/" + package_name + "/msg_docs", _files("msg_docs/*.md")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="helireach_ros maintainers",
+    maintainer_email="maintainers@helireach.invalid",
+    description="Helicopter engine-failure reachability: verified landing plans, H-V envelopes, ROS 2 nodes.",
+    license="Apache-2.0",
+    tests_require=["pytest"],
+    entry_points={
+        "console_scripts": [
+            "helireach = helireach_ros.cli:main",
+        ],
+    },
+)
