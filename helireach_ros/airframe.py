@@ -1,0 +1,287 @@
+"""Airframes and landing limits: immutable SI dataclasses loaded from validated YAML.
+
+Every number in an airframe file is written as ``{value, unit, source}``; the loader converts it
+to SI, checks its dimension and physical range, and rejects unknown or missing keys with a message
+that names the key and the file. Gross weight and density altitude can be overridden for sweeps.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from helireach_ros.resources import config_path
+from helireach_ros.units import UnitError, convert_to_si
+
+__all__ = [
+    "Airframe",
+    "ConfigError",
+    "LandingLimits",
+    "isa_density",
+    "load_airframe",
+    "parse_airframe",
+]
+
+SEA_LEVEL_DENSITY = 1.225
+"""ISA sea-level air density, kg/m³."""
+
+
+class ConfigError(ValueError):
+    """A configuration file that is missing, malformed, or holds non-physical values."""
+
+
+@dataclass(frozen=True)
+class LandingLimits:
+    """What counts as a safe touchdown, and the limits the landing must respect on the way.
+
+    Attributes:
+        max_descent_rate: |y| at touchdown, m/s (paper: 8 ft/s).
+        max_forward_speed: |v| at touchdown, m/s (paper: 6 kt).
+        height_tolerance: |h| that counts as "on the ground", m (paper: 1 ft).
+        ground_clearance: the path must stay above ``h = −ground_clearance``, m (the paper has none).
+        max_thrust_coefficient_over_solidity: blade stall, C_T ≤ this × σ (paper: 0.15).
+        max_pitch_angle: |θ| ≤ this, rad (paper: 40°).
+        min_rotor_speed_ratio: Ω ≥ this × Ω₀ along the path (the paper has none).
+        max_rotor_speed_ratio: Ω ≤ this × Ω₀ along the path (the paper has none).
+    """
+
+    max_descent_rate: float
+    max_forward_speed: float
+    height_tolerance: float
+    ground_clearance: float
+    max_thrust_coefficient_over_solidity: float
+    max_pitch_angle: float
+    min_rotor_speed_ratio: float
+    max_rotor_speed_ratio: float
+
+
+@dataclass(frozen=True)
+class Airframe:
+    """A helicopter's parameters for the paper's six-state model, all SI.
+
+    Attributes:
+        name: identifier, e.g. ``"uh60a_class"``.
+        gross_weight: W, N.
+        rotor_radius: R, m.
+        rotor_solidity: σ_R = N_b c / (π R).
+        nominal_rotor_speed: Ω₀, rad/s.
+        blade_drag_coefficient: c_d, blade profile drag coefficient.
+        rotor_inertia: I_R, kg m².
+        horizontal_drag_area: f_ez, m² (drag of forward motion).
+        vertical_drag_area: f_eh, m² (drag of vertical motion).
+        rotor_power_efficiency: η, main-rotor power / engine shaft power.
+        engine_time_constant: κ, s.
+        density_altitude: m; sets the air density through the ISA.
+        gravity: g, m/s².
+        limits: the landing and path limits.
+        sources: where each number came from (not part of equality or the hash).
+    """
+
+    name: str
+    gross_weight: float
+    rotor_radius: float
+    rotor_solidity: float
+    nominal_rotor_speed: float
+    blade_drag_coefficient: float
+    rotor_inertia: float
+    horizontal_drag_area: float
+    vertical_drag_area: float
+    rotor_power_efficiency: float
+    engine_time_constant: float
+    density_altitude: float
+    gravity: float
+    limits: LandingLimits
+    sources: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
+
+    @property
+    def mass(self) -> float:
+        """m = W / g, kg."""
+        return self.gross_weight / self.gravity
+
+    @property
+    def air_density(self) -> float:
+        """ρ at the density altitude (ISA), kg/m³."""
+        return isa_density(self.density_altitude)
+
+    @property
+    def disk_area(self) -> float:
+        """π R², m²."""
+        return math.pi * self.rotor_radius**2
+
+    @property
+    def max_thrust_coefficient(self) -> float:
+        """The stall limit on C_T."""
+        return self.limits.max_thrust_coefficient_over_solidity * self.rotor_solidity
+
+    def with_conditions(self, gross_weight: float | None = None, density_altitude: float | None = None) -> Airframe:
+        """Returns a copy at another gross weight (N) and/or density altitude (m)."""
+        changes: dict[str, float] = {}
+        if gross_weight is not None:
+            _check_range("gross_weight", gross_weight, 1.0, 1e7, "N")
+            changes["gross_weight"] = float(gross_weight)
+        if density_altitude is not None:
+            _check_range("density_altitude", density_altitude, -1000.0, 9000.0, "m")
+            changes["density_altitude"] = float(density_altitude)
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, Any]:
+        """All parameters in SI (plus the derived air density and mass), JSON-serialisable."""
+        data = dataclasses.asdict(self)
+        data.pop("sources")
+        data["air_density"] = self.air_density
+        data["mass"] = self.mass
+        return data
+
+    def digest(self) -> str:
+        """A short hash of the parameters (not the sources): equal airframes, equal digests."""
+        canonical = json.dumps(self.as_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(canonical.encode()).hexdigest()[:16]
+
+
+def isa_density(density_altitude: float) -> float:
+    """Air density at a density altitude in the International Standard Atmosphere (troposphere).
+
+    .. math:: \\rho = \\rho_0 (1 - L h / T_0)^{g M / (R L) - 1}
+
+    Args:
+        density_altitude: m.
+
+    Returns:
+        kg/m³.
+    """
+    lapse_rate, sea_level_temperature, exponent = 0.0065, 288.15, 4.2558797
+    return SEA_LEVEL_DENSITY * (1.0 - lapse_rate * density_altitude / sea_level_temperature) ** exponent
+
+
+# key -> (dimension, minimum, maximum) in SI; the ranges reject typos and wrong units, not design choices.
+_PARAMETER_SCHEMA: dict[str, tuple[str, float, float]] = {
+    "gross_weight": ("force", 100.0, 1e6),
+    "rotor_radius": ("length", 0.5, 30.0),
+    "rotor_solidity": ("dimensionless", 0.01, 0.3),
+    "nominal_rotor_speed": ("angular_speed", 5.0, 200.0),
+    "blade_drag_coefficient": ("dimensionless", 0.001, 0.05),
+    "rotor_inertia": ("inertia", 1.0, 1e6),
+    "horizontal_drag_area": ("area", 0.01, 50.0),
+    "vertical_drag_area": ("area", 0.01, 500.0),
+    "rotor_power_efficiency": ("dimensionless", 0.3, 1.0),
+    "engine_time_constant": ("time", 0.01, 60.0),
+    "density_altitude": ("length", -1000.0, 9000.0),
+    "gravity": ("acceleration", 9.0, 10.5),
+}
+
+_LIMITS_SCHEMA: dict[str, tuple[str, float, float]] = {
+    "max_descent_rate": ("speed", 0.01, 30.0),
+    "max_forward_speed": ("speed", 0.01, 30.0),
+    "height_tolerance": ("length", 0.001, 10.0),
+    "ground_clearance": ("length", 0.0, 10.0),
+    "max_thrust_coefficient_over_solidity": ("dimensionless", 0.01, 0.5),
+    "max_pitch_angle": ("angle", math.radians(1.0), math.radians(89.0)),
+    "min_rotor_speed_ratio": ("dimensionless", 0.1, 1.0),
+    "max_rotor_speed_ratio": ("dimensionless", 1.0, 3.0),
+}
+
+
+def _check_range(key: str, value: float, low: float, high: float, unit: str, where: str = "") -> None:
+    if not math.isfinite(value) or not low <= value <= high:
+        raise ConfigError(f"{where}{key} = {value!r} {unit} is outside the physical range [{low:g}, {high:g}] {unit}")
+
+
+def _parse_section(
+    section: Any, schema: dict[str, tuple[str, float, float]], section_name: str, where: str
+) -> tuple[dict[str, float], list[tuple[str, str]]]:
+    if not isinstance(section, dict):
+        raise ConfigError(f"{where}{section_name!r} must be a mapping of key: {{value, unit, source}}")
+    unknown = sorted(set(section) - set(schema))
+    if unknown:
+        raise ConfigError(f"{where}unknown key(s) in {section_name!r}: {', '.join(unknown)}")
+    missing = sorted(set(schema) - set(section))
+    if missing:
+        raise ConfigError(f"{where}missing key(s) in {section_name!r}: {', '.join(missing)}")
+    values: dict[str, float] = {}
+    sources: list[tuple[str, str]] = []
+    for key, (dimension, low, high) in schema.items():
+        entry = section[key]
+        label = f"{section_name}.{key}"
+        if (
+            not isinstance(entry, dict)
+            or set(entry) - {"value", "unit", "source", "note"}
+            or not ({"value", "unit", "source"} <= set(entry))
+        ):
+            raise ConfigError(f"{where}{label} must be {{value: <number>, unit: <unit>, source: <text>}}")
+        raw = entry["value"]
+        if isinstance(raw, bool) or not isinstance(raw, int | float):
+            raise ConfigError(f"{where}{label}.value must be a number, got {raw!r}")
+        if not str(entry["source"]).strip():
+            raise ConfigError(f"{where}{label}.source is empty: say where the number comes from, or 'assumed'")
+        try:
+            si_value = convert_to_si(raw, str(entry["unit"]), dimension)
+        except UnitError as error:
+            raise ConfigError(f"{where}{label}: {error}") from None
+        _check_range(label, si_value, low, high, _si_unit(dimension), where)
+        values[key] = si_value
+        sources.append((label, str(entry["source"])))
+    return values, sources
+
+
+def _si_unit(dimension: str) -> str:
+    return {
+        "force": "N", "length": "m", "dimensionless": "", "angular_speed": "rad/s", "inertia": "kg*m^2",
+        "area": "m^2", "time": "s", "acceleration": "m/s^2", "speed": "m/s", "angle": "rad",
+    }.get(dimension, "")  # fmt: skip
+
+
+def parse_airframe(document: Any, where: str = "") -> Airframe:
+    """Builds an :class:`Airframe` from a parsed YAML document.
+
+    Args:
+        document: the mapping with ``name``, ``parameters`` and ``limits``.
+        where: a prefix for error messages (the file name).
+
+    Raises:
+        ConfigError: naming the offending key.
+    """
+    if not isinstance(document, dict):
+        raise ConfigError(f"{where}an airframe file must be a mapping with name, parameters, limits")
+    allowed = {"name", "description", "parameters", "limits"}
+    unknown = sorted(set(document) - allowed)
+    if unknown:
+        raise ConfigError(f"{where}unknown top-level key(s): {', '.join(unknown)}")
+    for key in ("name", "parameters", "limits"):
+        if key not in document:
+            raise ConfigError(f"{where}missing top-level key: {key}")
+    parameters, parameter_sources = _parse_section(document["parameters"], _PARAMETER_SCHEMA, "parameters", where)
+    limits, limit_sources = _parse_section(document["limits"], _LIMITS_SCHEMA, "limits", where)
+    if limits["min_rotor_speed_ratio"] >= limits["max_rotor_speed_ratio"]:
+        raise ConfigError(f"{where}limits.min_rotor_speed_ratio must be below limits.max_rotor_speed_ratio")
+    return Airframe(
+        name=str(document["name"]),
+        limits=LandingLimits(**limits),
+        sources=tuple(parameter_sources + limit_sources),
+        **parameters,
+    )
+
+
+def load_airframe(name_or_path: str | Path) -> Airframe:
+    """Loads an airframe by name (``config/airframes/<name>.yaml``) or from a YAML file path.
+
+    Raises:
+        ConfigError: the file is missing, unreadable, or invalid (the message names the key).
+    """
+    candidate = Path(name_or_path).expanduser()
+    try:
+        path = candidate if candidate.suffix in {".yaml", ".yml"} else config_path(f"airframes/{name_or_path}.yaml")
+        text = path.read_text()
+    except (FileNotFoundError, OSError) as error:
+        raise ConfigError(f"airframe {str(name_or_path)!r}: {error}") from None
+    try:
+        document = yaml.safe_load(text)
+    except yaml.YAMLError as error:
+        raise ConfigError(f"{path}: not valid YAML: {error}") from None
+    return parse_airframe(document, where=f"{path}: ")

@@ -1,0 +1,223 @@
+"""The paper's six-state helicopter model after power loss (Lee 1985; Kirchner et al. 2020, eq. 13).
+
+State x = (y, v, Ω, h, z, P): descent rate y (m/s, positive down), forward speed v (m/s), rotor
+speed Ω (rad/s), height above ground h (m), distance z (m), engine power P (W).
+Control u = (C_T, θ): thrust coefficient and pitch angle (rad, positive nose down, REP-103 FLU).
+
+.. math::
+
+    \\dot y &= g - \\frac{\\rho}{m} A (\\Omega R)^2 C_T \\cos\\theta - \\tfrac12 \\frac{\\rho}{m} f_{eh} V_f y \\\\
+    \\dot v &= \\frac{\\rho}{m} A (\\Omega R)^2 C_T \\sin\\theta - \\tfrac12 \\frac{\\rho}{m} f_{ez} V_f v \\\\
+    \\dot\\Omega &= \\frac{1}{I_R \\Omega}\\Big(P - \\frac{1}{\\eta} \\rho A (\\Omega R)^3 C_P\\Big), \\quad
+        C_P = \\tfrac18 \\sigma c_d + C_T \\lambda, \\quad
+        \\lambda = \\frac{v\\sin\\theta - y\\cos\\theta + \\nu}{\\Omega R}, \\quad \\nu = \\Omega R \\sqrt{C_T/2} \\\\
+    \\dot h &= -y, \\quad \\dot z = v, \\quad \\dot P = -P/\\kappa
+
+Deviations from the paper, on purpose:
+
+* vertical drag opposes descent (``−½ρ f_eh V_f y / m``); the paper prints ``+``, a sign typo;
+* √C_T, 1/Ω and V_f = √(y² + v²) use smooth guarded forms (below) so the NLP has finite
+  derivatives at C_T = 0, Ω → 0 and V_f = 0; the guards change values by < 1e-6 relative in the
+  flight envelope;
+* the induced velocity is the paper's hover value at all speeds (kept; the advance velocity U_T,
+  defined in the paper but unused, stays unused).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import casadi as ca
+import numpy as np
+
+from helireach_ros.airframe import Airframe
+
+__all__ = [
+    "CONTROL_NAMES",
+    "STATE_NAMES",
+    "STATE_UNITS",
+    "HelicopterState",
+    "TrimCondition",
+    "dynamics_function",
+    "initial_state_after_failure",
+    "smooth_positive",
+    "steady_autorotation",
+    "trim_level_flight",
+]
+
+STATE_NAMES = ("descent_rate", "forward_speed", "rotor_speed", "height", "distance", "engine_power")
+STATE_UNITS = ("m/s", "m/s", "rad/s", "m", "m", "W")
+CONTROL_NAMES = ("thrust_coefficient", "pitch_angle")
+
+_THRUST_GUARD = 1e-7  # C_T below which √C_T is smoothed (trim C_T is ~6e-3)
+_SPEED_GUARD = 1e-2  # m/s added in quadrature to V_f
+_ROTOR_GUARD_RATIO = 0.05  # 1/Ω smoothed below 5 % of Ω₀, far outside any rotor-speed limit
+
+
+def smooth_positive(value, width: float):
+    """A smooth, strictly positive stand-in for max(value, 0).
+
+    .. math:: s(x) = \\tfrac12\\big(x + \\sqrt{x^2 + w^2}\\big)
+
+    Equal to ``value`` to within ``w²/(4x)`` for ``x ≫ w``, and ``w/2`` at 0.
+    """
+    return 0.5 * (value + ca.sqrt(value**2 + width**2))
+
+
+@dataclass(frozen=True)
+class HelicopterState:
+    """A state of the model in SI (see the module docstring for the conventions)."""
+
+    descent_rate: float
+    forward_speed: float
+    rotor_speed: float
+    height: float
+    distance: float = 0.0
+    engine_power: float = 0.0
+
+    def as_array(self) -> np.ndarray:
+        """The state vector (y, v, Ω, h, z, P)."""
+        return np.array(
+            [self.descent_rate, self.forward_speed, self.rotor_speed, self.height, self.distance, self.engine_power]
+        )
+
+    @classmethod
+    def from_array(cls, values) -> HelicopterState:
+        """Builds a state from a length-6 vector."""
+        array = np.asarray(values, dtype=float).reshape(-1)
+        if array.size != 6:
+            raise ValueError(f"a helicopter state has 6 components (y, v, Omega, h, z, P), got {array.size}")
+        return cls(*(float(component) for component in array))
+
+
+def _rotor_terms(airframe: Airframe, state, control):
+    """Thrust per unit mass and rotor power required (shared by dynamics and trim)."""
+    y, v, rotor_speed = state[0], state[1], state[2]
+    thrust_coefficient, pitch = control[0], control[1]
+    density = airframe.air_density
+    tip_speed = rotor_speed * airframe.rotor_radius
+    thrust_per_mass = density / airframe.mass * airframe.disk_area * tip_speed**2 * thrust_coefficient
+    induced_velocity = tip_speed * ca.sqrt(smooth_positive(thrust_coefficient, _THRUST_GUARD) / 2.0)
+    guarded_tip_speed = smooth_positive(rotor_speed, _ROTOR_GUARD_RATIO * airframe.nominal_rotor_speed) * (
+        airframe.rotor_radius
+    )
+    inflow_ratio = (v * ca.sin(pitch) - y * ca.cos(pitch) + induced_velocity) / guarded_tip_speed
+    power_coefficient = airframe.rotor_solidity * airframe.blade_drag_coefficient / 8.0 + thrust_coefficient * (
+        inflow_ratio
+    )
+    rotor_power = density * airframe.disk_area * tip_speed**3 * power_coefficient / airframe.rotor_power_efficiency
+    return thrust_per_mass, rotor_power
+
+
+def _fuselage_speed(y, v):
+    return ca.sqrt(y**2 + v**2 + _SPEED_GUARD**2)
+
+
+def _state_derivative(airframe: Airframe, state, control):
+    y, v, rotor_speed, _, _, power = (state[i] for i in range(6))
+    pitch = control[1]
+    drag_per_speed = 0.5 * airframe.air_density / airframe.mass * _fuselage_speed(y, v)
+    thrust_per_mass, rotor_power = _rotor_terms(airframe, state, control)
+    guarded_rotor_speed = smooth_positive(rotor_speed, _ROTOR_GUARD_RATIO * airframe.nominal_rotor_speed)
+    return ca.vertcat(
+        airframe.gravity - thrust_per_mass * ca.cos(pitch) - drag_per_speed * airframe.vertical_drag_area * y,
+        thrust_per_mass * ca.sin(pitch) - drag_per_speed * airframe.horizontal_drag_area * v,
+        (power - rotor_power) / (airframe.rotor_inertia * guarded_rotor_speed),
+        -y,
+        v,
+        -power / airframe.engine_time_constant,
+    )
+
+
+@lru_cache(maxsize=64)
+def dynamics_function(airframe: Airframe) -> ca.Function:
+    """The model as a CasADi function ``f(x[6], u[2]) -> xdot[6]``, built once per airframe.
+
+    Every user of the model (NLP, replay, simulator, trim) calls this one function.
+    """
+    state = ca.SX.sym("x", 6)
+    control = ca.SX.sym("u", 2)
+    return ca.Function(
+        "helicopter_dynamics", [state, control], [_state_derivative(airframe, state, control)], ["x", "u"], ["xdot"]
+    )
+
+
+@dataclass(frozen=True)
+class TrimCondition:
+    """Level, unaccelerated flight at constant rotor speed.
+
+    Attributes:
+        forward_speed: m/s.
+        thrust_coefficient: C_T.
+        pitch_angle: θ, rad (positive nose down).
+        power: engine power that holds Ω = Ω₀, W.
+    """
+
+    forward_speed: float
+    thrust_coefficient: float
+    pitch_angle: float
+    power: float
+
+
+def trim_level_flight(airframe: Airframe, forward_speed: float) -> TrimCondition:
+    """Trims level flight (y = 0, ẏ = v̇ = Ω̇ = 0, Ω = Ω₀) at a forward speed.
+
+    Thrust balances weight and the fuselage drag exactly as the model computes them, so the
+    returned condition is an equilibrium of :func:`dynamics_function` (P held by the engine).
+
+    Raises:
+        ValueError: if the speed is negative/non-finite or the trim needs C_T above the stall limit.
+    """
+    if not np.isfinite(forward_speed) or forward_speed < 0.0:
+        raise ValueError(f"forward speed must be finite and >= 0 m/s, got {forward_speed!r}")
+    drag = float(0.5 * airframe.air_density * airframe.horizontal_drag_area * _fuselage_speed(0.0, forward_speed))
+    drag *= forward_speed
+    weight = airframe.gross_weight
+    pitch = float(np.arctan2(drag, weight))
+    tip_speed = airframe.nominal_rotor_speed * airframe.rotor_radius
+    thrust_coefficient = float(np.hypot(weight, drag) / (airframe.air_density * airframe.disk_area * tip_speed**2))
+    if thrust_coefficient > airframe.max_thrust_coefficient:
+        raise ValueError(
+            f"level flight at {forward_speed:.1f} m/s needs C_T = {thrust_coefficient:.4f}, above the stall limit "
+            f"{airframe.max_thrust_coefficient:.4f}"
+        )
+    state = [0.0, forward_speed, airframe.nominal_rotor_speed, 0.0, 0.0, 0.0]
+    _, rotor_power = _rotor_terms(airframe, state, [thrust_coefficient, pitch])
+    return TrimCondition(forward_speed, thrust_coefficient, pitch, float(rotor_power))
+
+
+def initial_state_after_failure(
+    airframe: Airframe, height: float, forward_speed: float, power_fraction: float = 0.0
+) -> HelicopterState:
+    """The state at the instant of an engine failure from level trim.
+
+    Args:
+        airframe: the helicopter.
+        height: above ground, m.
+        forward_speed: m/s.
+        power_fraction: engine power left, as a fraction of trim power (0 = total loss, the
+            paper's case); it then decays with the engine time constant κ.
+    """
+    if not 0.0 <= power_fraction <= 1.0:
+        raise ValueError(f"power fraction must lie in [0, 1], got {power_fraction!r}")
+    if not np.isfinite(height):
+        raise ValueError(f"height must be finite, got {height!r}")
+    trim = trim_level_flight(airframe, forward_speed)
+    return HelicopterState(0.0, forward_speed, airframe.nominal_rotor_speed, height, 0.0, power_fraction * trim.power)
+
+
+def steady_autorotation(airframe: Airframe, forward_speed: float) -> tuple[float, float, float]:
+    """Finds the steady power-off descent (ẏ = v̇ = Ω̇ = 0 at Ω = Ω₀, P = 0) at a forward speed.
+
+    Returns:
+        (descent rate y in m/s, thrust coefficient C_T, pitch angle θ in rad).
+    """
+    unknowns = ca.SX.sym("w", 3)  # y, C_T, θ
+    state = ca.vertcat(unknowns[0], forward_speed, airframe.nominal_rotor_speed, 0.0, 0.0, 0.0)
+    derivative = dynamics_function(airframe)(state, ca.vertcat(unknowns[1], unknowns[2]))
+    residual = ca.Function("autorotation_residual", [unknowns], [derivative[:3]])
+    solver = ca.rootfinder("steady_autorotation", "newton", residual, {"abstol": 1e-12})
+    hover = trim_level_flight(airframe, 0.0)
+    solution = np.asarray(solver(ca.DM([15.0, hover.thrust_coefficient, 0.0]))).reshape(-1)
+    return float(solution[0]), float(solution[1]), float(solution[2])

@@ -1,0 +1,118 @@
+"""Planner settings: which transcription, its resolution, IPOPT options and replay tolerances."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from helireach_ros.airframe import ConfigError
+from helireach_ros.resources import config_path
+
+__all__ = ["METHODS", "PlannerSettings", "load_settings"]
+
+METHODS = ("verified", "paper")
+
+
+@dataclass(frozen=True)
+class PlannerSettings:
+    """How a landing NLP is transcribed and solved. Immutable and hashable: solvers are cached on it.
+
+    Attributes:
+        method: ``"verified"`` (free-final-time multi-interval Radau in physical time, the default)
+            or ``"paper"`` (the paper's single-interval LGR with time freeze and log time transform).
+        intervals: verified: number of collocation intervals.
+        degree: verified: Radau IIA points per interval.
+        final_interval_ratio: verified: length of the last interval over the first; < 1 puts more
+            intervals into the flare, where the paper's scheme loses its accuracy.
+        min_time_to_land: verified: lower bound on the landing time, s.
+        max_time_to_land: verified: upper bound on the landing time, s.
+        smoothness_weight: weight of the control-smoothness term that makes the plan unique among
+            equally safe ones (the secondary criterion); it can only raise the value, never lower it.
+        paper_points: paper: N, the number of LGR collocation points.
+        paper_time_scale: paper: c in s = c log(2 / (1 − τ)), s.
+        tolerance: IPOPT ``tol``.
+        max_iterations: IPOPT ``max_iter``.
+        replay_relative_tolerance: CVODES relative tolerance of the independent replay.
+        replay_samples_per_interval: replay output points per control interval.
+        rotor_speed_replay_margin: the replayed Ω may exceed its limits by this fraction of Ω₀
+            (collocation enforces the limits only at its points) before the plan is rejected.
+    """
+
+    method: str = "verified"
+    intervals: int = 40
+    degree: int = 3
+    final_interval_ratio: float = 0.35
+    min_time_to_land: float = 0.2
+    max_time_to_land: float = 60.0
+    smoothness_weight: float = 1e-3
+    paper_points: int = 24
+    paper_time_scale: float = 3.0
+    tolerance: float = 1e-7
+    max_iterations: int = 300
+    replay_relative_tolerance: float = 1e-8
+    replay_samples_per_interval: int = 8
+    rotor_speed_replay_margin: float = 0.005
+
+    def __post_init__(self) -> None:
+        problems = []
+        if self.method not in METHODS:
+            problems.append(f"method must be one of {METHODS}, got {self.method!r}")
+        for name, low, high in (
+            ("intervals", 1, 1000),
+            ("degree", 1, 9),
+            ("paper_points", 3, 200),
+            ("max_iterations", 1, 100000),
+            ("replay_samples_per_interval", 1, 1000),
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+                problems.append(f"{name} must be an integer in [{low}, {high}], got {value!r}")
+        for name, low, high in (
+            ("final_interval_ratio", 0.01, 100.0),
+            ("min_time_to_land", 0.01, 10.0),
+            ("max_time_to_land", 1.0, 600.0),
+            ("smoothness_weight", 0.0, 1.0),
+            ("paper_time_scale", 0.1, 100.0),
+            ("tolerance", 1e-12, 1e-2),
+            ("replay_relative_tolerance", 1e-12, 1e-3),
+            ("rotor_speed_replay_margin", 0.0, 0.1),
+        ):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
+                problems.append(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}")
+        if not problems and self.min_time_to_land >= self.max_time_to_land:
+            problems.append("min_time_to_land must be below max_time_to_land")
+        if problems:
+            raise ConfigError("planner settings: " + "; ".join(problems))
+
+    def replace(self, **changes: Any) -> PlannerSettings:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+
+def load_settings(path: str | Path | None = None, **overrides: Any) -> PlannerSettings:
+    """Loads planner settings from YAML (default ``config/planner.yaml``), then applies overrides.
+
+    Raises:
+        ConfigError: unknown keys, wrong types, or values out of range (the message names them).
+    """
+    source = config_path(path if path is not None else "planner.yaml")
+    try:
+        document = yaml.safe_load(source.read_text()) or {}
+    except (OSError, yaml.YAMLError) as error:
+        raise ConfigError(f"{source}: cannot read planner settings: {error}") from None
+    if not isinstance(document, dict):
+        raise ConfigError(f"{source}: planner settings must be a mapping")
+    known = {field.name for field in dataclasses.fields(PlannerSettings)}
+    unknown = sorted(set(document) - known)
+    if unknown:
+        raise ConfigError(f"{source}: unknown planner setting(s): {', '.join(unknown)}")
+    document.update({key: value for key, value in overrides.items() if value is not None})
+    try:
+        return PlannerSettings(**document)
+    except ConfigError as error:
+        raise ConfigError(f"{source}: {error}") from None

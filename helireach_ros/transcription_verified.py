@@ -1,0 +1,112 @@
+"""The default ("verified") transcription: free final time, multi-interval Radau, physical time.
+
+The landing time T is a decision variable; [0, T] is split into K intervals whose lengths shrink
+geometrically towards touchdown (ratio ``final_interval_ratio`` last/first), so the flare — where
+the paper's single-interval log-time scheme is least accurate — gets the finest mesh. In each
+interval the state is a degree-d polynomial through the interval start and d Radau IIA points, the
+control is constant (what the replay integrates exactly), and
+
+.. math:: \\sum_{j=0}^{d} C_{ij} x_{k,j} = h_k f(x_{k,i}, u_k), \\qquad i = 1..d,
+
+with :math:`C_{ij} = L_j'(\\tau_i)` on [0, 1]. Minimising J(x(T)) over T is the BRT value of the
+paper's time-freeze formulation (freezing after touchdown is the same as stopping at T).
+Ground and rotor-speed limits hold at every collocation point (simple variable bounds).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from helireach_ros.collocation import lagrange_basis_derivatives, radau_iia_points
+from helireach_ros.transcription import DecodedPlan, Transcription
+
+__all__ = ["VerifiedTranscription", "interval_fractions"]
+
+_TIME_SCALE = 10.0  # s; T is optimised as T / 10
+
+
+def interval_fractions(count: int, final_ratio: float) -> np.ndarray:
+    """Interval lengths as fractions of T, geometric with last/first = ``final_ratio``; sums to 1."""
+    if count == 1:
+        return np.ones(1)
+    lengths = final_ratio ** (np.arange(count) / (count - 1))
+    return lengths / lengths.sum()
+
+
+class VerifiedTranscription(Transcription):
+    """Free-final-time multi-interval Radau collocation (see the module docstring)."""
+
+    def _build(self) -> None:
+        settings = self.settings
+        intervals, degree = settings.intervals, settings.degree
+        self.fractions = interval_fractions(intervals, settings.final_interval_ratio)
+        self.interval_starts = np.concatenate([[0.0], np.cumsum(self.fractions)[:-1]])
+        self.radau = radau_iia_points(degree)
+        support = np.concatenate([[0.0], self.radau])
+        collocation_matrix = lagrange_basis_derivatives(support, self.radau)
+
+        self.n_states = intervals * degree
+        decision = ca.SX.sym("w", 2 + 2 * intervals + 6 * self.n_states)
+        self.decision = decision
+        time_scaled, slack = decision[0], decision[1]
+        controls = ca.reshape(decision[2 : 2 + 2 * intervals], 2, intervals)
+        states = ca.reshape(decision[2 + 2 * intervals :], 6, self.n_states)
+        landing_time = time_scaled * _TIME_SCALE
+
+        state_scale = ca.DM(self.state_scale)
+        control_scale = ca.DM(self.control_scale)
+        physical_states = states * ca.repmat(state_scale, 1, self.n_states)
+        physical_controls = controls * ca.repmat(control_scale, 1, intervals)
+        control_at_point = ca.repmat(physical_controls, degree, 1)
+        control_at_point = ca.reshape(control_at_point, 2, self.n_states)
+        derivatives = self.dynamics.map(self.n_states)(physical_states, control_at_point)
+
+        residuals = []
+        previous_end = self.initial_state
+        for k in range(intervals):
+            columns = [previous_end] + [physical_states[:, k * degree + i] for i in range(degree)]
+            step = landing_time * float(self.fractions[k])
+            for i in range(degree):
+                slope = sum(float(collocation_matrix[i, j]) * columns[j] for j in range(degree + 1))
+                residuals.append((slope - step * derivatives[:, k * degree + i]) / state_scale)
+            previous_end = columns[-1]
+        terminal_scaled = states[:, -1]
+
+        self.objective = slack + settings.smoothness_weight * self.smoothness(controls)
+        self.constraints = ca.vertcat(*residuals, self.epigraph(slack, terminal_scaled))
+        n_equalities = 6 * self.n_states
+        self.lbg = np.concatenate([np.zeros(n_equalities), np.full(6, -np.inf)])
+        self.ubg = np.zeros(n_equalities + 6)
+
+        state_low, state_high = self.scaled_state_bounds(self.n_states)
+        control_low, control_high = self.scaled_control_bounds(intervals)
+        self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
+        self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
+
+    def _point_fractions(self) -> np.ndarray:
+        """Times of the collocation points as fractions of T (excluding 0)."""
+        return (self.interval_starts[:, None] + self.fractions[:, None] * self.radau[None, :]).reshape(-1)
+
+    def initial_guess(self, initial_state: np.ndarray) -> np.ndarray:
+        landing_time = self.guess_landing_time(initial_state)
+        times = self._point_fractions() * landing_time
+        states = self.guess_states(initial_state, times, landing_time)
+        controls = np.tile([[self.hover_thrust_coefficient], [0.0]], (1, self.settings.intervals))
+        return np.concatenate(
+            [
+                [landing_time / _TIME_SCALE, 0.0],
+                (controls / self.control_scale[:, None]).reshape(-1, order="F"),
+                (states / self.state_scale[:, None]).reshape(-1, order="F"),
+            ]
+        )
+
+    def decode(self, solution: np.ndarray, initial_state: np.ndarray) -> DecodedPlan:
+        intervals = self.settings.intervals
+        landing_time = float(solution[0]) * _TIME_SCALE
+        controls = solution[2 : 2 + 2 * intervals].reshape(2, intervals, order="F") * self.control_scale[:, None]
+        states = solution[2 + 2 * intervals :].reshape(6, self.n_states, order="F") * self.state_scale[:, None]
+        node_times = np.concatenate([[0.0], self._point_fractions() * landing_time])
+        node_states = np.column_stack([np.asarray(initial_state, dtype=float), states])
+        control_times = np.concatenate([self.interval_starts, [1.0]]) * landing_time
+        return DecodedPlan(landing_time, node_times, node_states, control_times, controls, "zero_order_hold")
