@@ -20,7 +20,7 @@ import numpy as np
 from helireach_ros.airframe import Airframe
 from helireach_ros.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState
 from helireach_ros.settings import PlannerSettings
-from helireach_ros.transcription import SUCCESS_STATUSES, DecodedPlan, Transcription, terminal_cost
+from helireach_ros.transcription import SUCCESS_STATUSES, Transcription, terminal_cost
 from helireach_ros.transcription_paper import PaperTranscription
 from helireach_ros.transcription_verified import VerifiedTranscription
 from helireach_ros.units import FT, KT
@@ -90,6 +90,8 @@ class LandingPlan:
     control_times: np.ndarray
     control_values: np.ndarray
     control_interpolation: str
+    curve_times: np.ndarray
+    curve_states: np.ndarray
     replay: ReplaySummary
     solver: SolverStats
     nominal_rotor_speed: float
@@ -107,18 +109,12 @@ class LandingPlan:
 
     def controls_at(self, times) -> np.ndarray:
         """The planned (C_T, θ) at the given times, 2 × len(times)."""
-        return control_function(self._decoded(), times)
+        return control_function(self.control_times, self.control_values, self.control_interpolation, times)
 
     @property
     def controls(self) -> np.ndarray:
         """The planned controls at the node times (2 × len(times))."""
         return self.controls_at(self.times)
-
-    def _decoded(self) -> DecodedPlan:
-        return DecodedPlan(
-            self.time_to_land, self.times, self.states, self.control_times, self.control_values,
-            self.control_interpolation,
-        )  # fmt: skip
 
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary: the fields of ``helireach plan --json``."""
@@ -261,6 +257,8 @@ class LandingPlanner:
             control_times=decoded.control_times,
             control_values=decoded.control_values,
             control_interpolation=decoded.control_interpolation,
+            curve_times=decoded.curve_times,
+            curve_states=decoded.curve_states,
             replay=replay,
             solver=solver_stats,
             nominal_rotor_speed=self.airframe.nominal_rotor_speed,

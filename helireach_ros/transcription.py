@@ -60,6 +60,8 @@ class DecodedPlan:
         control_values: 2 × n: the control on each interval (zero-order hold, n = breakpoints − 1)
             or at each breakpoint (linear, n = breakpoints).
         control_interpolation: ``"zero_order_hold"`` or ``"linear"``.
+        curve_times: dense times on the collocation polynomial, s (for figures).
+        curve_states: the collocation polynomial there, 6 × len(curve_times).
     """
 
     time_to_land: float
@@ -68,6 +70,8 @@ class DecodedPlan:
     control_times: np.ndarray
     control_values: np.ndarray
     control_interpolation: str
+    curve_times: np.ndarray
+    curve_states: np.ndarray
 
 
 class Transcription(ABC):

@@ -22,7 +22,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from helireach_ros.collocation import lagrange_basis_derivatives, lgr_points, lgr_weights
+from helireach_ros.collocation import lagrange_basis_derivatives, lagrange_basis_values, lgr_points, lgr_weights
 from helireach_ros.transcription import DecodedPlan, Transcription
 
 __all__ = ["PaperTranscription"]
@@ -39,6 +39,7 @@ class PaperTranscription(Transcription):
         support = np.concatenate([self.tau, [1.0]])
         self.differentiation = lagrange_basis_derivatives(support, self.tau)
         self.time_derivative = scale_c / (1.0 - self.tau)  # ds/dτ at the collocation points
+        self.curve_basis = lagrange_basis_values(support, np.linspace(-1.0, 1.0, 241))
 
         decision = ca.SX.sym("w", 1 + 3 * count + 6 * count)
         self.decision = decision
@@ -100,4 +101,13 @@ class PaperTranscription(Transcription):
         states = solution[1 + 3 * count :].reshape(6, count, order="F") * self.state_scale[:, None]
         node_times = self._node_times(freeze)
         node_states = np.column_stack([np.asarray(initial_state, dtype=float), states])
-        return DecodedPlan(float(node_times[-1]), node_times, node_states, node_times[:count], controls, "linear")
+        return DecodedPlan(
+            float(node_times[-1]),
+            node_times,
+            node_states,
+            node_times[:count],
+            controls,
+            "linear",
+            self.curve_basis @ node_times,
+            node_states @ self.curve_basis.T,
+        )

@@ -18,12 +18,13 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from helireach_ros.collocation import lagrange_basis_derivatives, radau_iia_points
+from helireach_ros.collocation import lagrange_basis_derivatives, lagrange_basis_values, radau_iia_points
 from helireach_ros.transcription import DecodedPlan, Transcription
 
 __all__ = ["VerifiedTranscription", "interval_fractions"]
 
 _TIME_SCALE = 10.0  # s; T is optimised as T / 10
+_CURVE_SAMPLES = 8  # polynomial samples per interval for figures
 
 
 def interval_fractions(count: int, final_ratio: float) -> np.ndarray:
@@ -45,6 +46,8 @@ class VerifiedTranscription(Transcription):
         self.radau = radau_iia_points(degree)
         support = np.concatenate([[0.0], self.radau])
         collocation_matrix = lagrange_basis_derivatives(support, self.radau)
+        self.curve_points = np.linspace(0.0, 1.0, _CURVE_SAMPLES + 1)[1:]
+        self.curve_basis = lagrange_basis_values(support, self.curve_points)
 
         self.n_states = intervals * degree
         decision = ca.SX.sym("w", 2 + 2 * intervals + 6 * self.n_states)
@@ -109,4 +112,21 @@ class VerifiedTranscription(Transcription):
         node_times = np.concatenate([[0.0], self._point_fractions() * landing_time])
         node_states = np.column_stack([np.asarray(initial_state, dtype=float), states])
         control_times = np.concatenate([self.interval_starts, [1.0]]) * landing_time
-        return DecodedPlan(landing_time, node_times, node_states, control_times, controls, "zero_order_hold")
+        # Each interval's polynomial runs through its start (the previous interval's end) and its d points.
+        degree = self.settings.degree
+        starts = node_states[:, 0 : self.n_states : degree]
+        blocks = np.concatenate([starts[:, :, None], states.reshape(6, intervals, degree)], axis=2)
+        curve_states = np.einsum("sj,ikj->iks", self.curve_basis, blocks).reshape(6, -1)
+        curve_times = (
+            (self.interval_starts[:, None] + self.fractions[:, None] * self.curve_points[None, :]) * landing_time
+        ).reshape(-1)
+        return DecodedPlan(
+            landing_time,
+            node_times,
+            node_states,
+            control_times,
+            controls,
+            "zero_order_hold",
+            np.concatenate([[0.0], curve_times]),
+            np.column_stack([node_states[:, 0], curve_states]),
+        )

@@ -56,14 +56,20 @@ class ReplaySummary:
     states: np.ndarray
 
 
-def control_function(plan: DecodedPlan, times) -> np.ndarray:
-    """The plan's controls at the given times (2 × len(times)); held constant outside the plan."""
+def control_function(control_times: np.ndarray, control_values: np.ndarray, interpolation: str, times) -> np.ndarray:
+    """A plan's controls at the given times (2 × len(times)); held constant outside the plan.
+
+    Args:
+        control_times: the breakpoints, s.
+        control_values: 2 × n; per interval (``"zero_order_hold"``) or per breakpoint (``"linear"``).
+        interpolation: ``"zero_order_hold"`` or ``"linear"``.
+        times: where to evaluate, s.
+    """
     times = np.atleast_1d(np.asarray(times, dtype=float))
-    breakpoints = plan.control_times
-    if plan.control_interpolation == "zero_order_hold":
-        index = np.clip(np.searchsorted(breakpoints, times, side="right") - 1, 0, plan.control_values.shape[1] - 1)
-        return plan.control_values[:, index]
-    return np.vstack([np.interp(times, breakpoints, row) for row in plan.control_values])
+    if interpolation == "zero_order_hold":
+        index = np.searchsorted(control_times, times, side="right") - 1
+        return control_values[:, np.clip(index, 0, control_values.shape[1] - 1)]
+    return np.vstack([np.interp(times, control_times, row) for row in control_values])
 
 
 @lru_cache(maxsize=16)
@@ -98,7 +104,9 @@ def _segments(plan: DecodedPlan) -> list[tuple[float, float, np.ndarray, np.ndar
         else:
             pieces.append((start, end, plan.control_values[:, k], plan.control_values[:, k + 1]))
     if breakpoints[-1] < plan.time_to_land - 1e-9:
-        last = control_function(plan, [plan.time_to_land])[:, 0]
+        last = control_function(
+            plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land]
+        )[:, 0]
         pieces.append((float(breakpoints[-1]), plan.time_to_land, last, last))
     return pieces
 
