@@ -1,0 +1,86 @@
+"""Model sanity: trim balances weight and drag, autorotation has a steady descent, signs are physical."""
+
+import numpy as np
+import pytest
+
+from helireach_ros.airframe import load_airframe
+from helireach_ros.model import (
+    dynamics_function,
+    initial_state_after_failure,
+    steady_autorotation,
+    trim_level_flight,
+)
+from helireach_ros.units import FT, KT
+
+
+@pytest.fixture(scope="module")
+def uh60():
+    return load_airframe("uh60a_class")
+
+
+def test_hover_trim_thrust_balances_weight(uh60):
+    trim = trim_level_flight(uh60, 0.0)
+    tip_speed = uh60.nominal_rotor_speed * uh60.rotor_radius
+    thrust = uh60.air_density * uh60.disk_area * tip_speed**2 * trim.thrust_coefficient
+    assert thrust == pytest.approx(uh60.gross_weight, rel=1e-12)
+    assert trim.pitch_angle == 0.0
+    assert 0.0 < trim.thrust_coefficient < uh60.max_thrust_coefficient
+
+
+@pytest.mark.parametrize("speed_kt", [0.0, 40.0, 75.0, 120.0])
+def test_level_trim_is_an_equilibrium_with_trim_power(uh60, speed_kt):
+    trim = trim_level_flight(uh60, speed_kt * KT)
+    state = initial_state_after_failure(uh60, 100.0, speed_kt * KT, power_fraction=1.0).as_array()
+    derivative = np.asarray(dynamics_function(uh60)(state, [trim.thrust_coefficient, trim.pitch_angle])).ravel()
+    np.testing.assert_allclose(derivative[:4], [0.0, 0.0, 0.0, 0.0], atol=1e-9)
+    assert derivative[4] == pytest.approx(speed_kt * KT)
+    assert trim.power > 0.0
+    assert trim.pitch_angle >= 0.0  # nose down to pull forward against drag
+
+
+def test_trim_power_grows_with_speed_in_this_inflow_model(uh60):
+    powers = [trim_level_flight(uh60, v * KT).power for v in (0.0, 40.0, 80.0, 120.0)]
+    assert np.all(np.diff(powers) > 0.0)
+    # UH-60A-class hover power is of the order of the installed power (two ~1,500 shp engines).
+    assert 1000.0 < powers[0] / 745.7 < 3500.0
+
+
+@pytest.mark.parametrize("speed_kt", [0.0, 30.0, 60.0])
+def test_steady_autorotation_descends_at_constant_rotor_speed(uh60, speed_kt):
+    descent_rate, thrust_coefficient, pitch = steady_autorotation(uh60, speed_kt * KT)
+    state = np.array([descent_rate, speed_kt * KT, uh60.nominal_rotor_speed, 100.0, 0.0, 0.0])
+    derivative = np.asarray(dynamics_function(uh60)(state, [thrust_coefficient, pitch])).ravel()
+    np.testing.assert_allclose(derivative[:3], 0.0, atol=1e-8)
+    assert 20.0 < descent_rate / FT < 80.0  # a steep power-off descent, tens of ft/s
+    assert 0.0 < thrust_coefficient < uh60.max_thrust_coefficient
+
+
+def test_vertical_drag_opposes_descent(uh60):
+    dynamics = dynamics_function(uh60)
+    falling = np.asarray(dynamics([20.0, 0.0, 27.0, 100.0, 0.0, 0.0], [0.0, 0.0])).ravel()
+    climbing = np.asarray(dynamics([-20.0, 0.0, 27.0, 100.0, 0.0, 0.0], [0.0, 0.0])).ravel()
+    assert falling[0] < uh60.gravity < climbing[0]
+
+
+def test_power_off_rotor_decays_in_level_flight(uh60):
+    trim = trim_level_flight(uh60, 75 * KT)
+    state = initial_state_after_failure(uh60, 150.0, 75 * KT, power_fraction=0.0).as_array()
+    derivative = np.asarray(dynamics_function(uh60)(state, [trim.thrust_coefficient, trim.pitch_angle])).ravel()
+    assert derivative[2] < 0.0
+
+
+def test_trim_beyond_stall_is_refused(uh60):
+    heavy = uh60.with_conditions(gross_weight=3.0 * uh60.gross_weight)
+    with pytest.raises(ValueError, match="stall"):
+        trim_level_flight(heavy, 0.0)
+
+
+def test_initial_state_after_failure_keeps_a_fraction_of_trim_power(uh60):
+    trim = trim_level_flight(uh60, 50 * KT)
+    state = initial_state_after_failure(uh60, 200 * FT, 50 * KT, power_fraction=0.25)
+    assert state.engine_power == pytest.approx(0.25 * trim.power)
+    assert state.height == pytest.approx(200 * FT)
+    with pytest.raises(ValueError):
+        initial_state_after_failure(uh60, 200 * FT, 50 * KT, power_fraction=1.5)
+    with pytest.raises(ValueError):
+        initial_state_after_failure(uh60, float("nan"), 50 * KT)
