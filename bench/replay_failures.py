@@ -1,0 +1,75 @@
+"""How often does each transcription call a state safe that its own replay does not land?
+
+Run: .venv/bin/python bench/replay_failures.py [--heights 17] [--speeds 13]
+
+Over a grid of failure states (0–800 ft × 0–120 kt, total power loss, uh60a_class), each variant
+solves every state cold. For each variant it prints: cells whose NLP value is ≤ 0 ("NLP-safe"),
+how many of those fail the independent CVODES replay (the variant's optimism), how many cells it
+calls safe that the finest verified variant calls unsafe, and the median/p95 solve time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from helireach_ros.airframe import load_airframe
+from helireach_ros.model import initial_state_after_failure
+from helireach_ros.planner import get_planner
+from helireach_ros.settings import PlannerSettings
+from helireach_ros.units import FT, KT
+
+VARIANTS = {
+    "paper N=24 c=3 (paper)": PlannerSettings(method="paper", paper_points=24, paper_time_scale=3.0),
+    "paper N=24 c=6": PlannerSettings(method="paper", paper_points=24, paper_time_scale=6.0),
+    "paper N=60 c=6": PlannerSettings(method="paper", paper_points=60, paper_time_scale=6.0),
+    "verified K=20 d=3": PlannerSettings(intervals=20),
+    "verified K=40 d=3 (default)": PlannerSettings(),
+    "verified K=80 d=3 (reference)": PlannerSettings(intervals=80),
+}
+REFERENCE = "verified K=80 d=3 (reference)"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--heights", type=int, default=17)
+    parser.add_argument("--speeds", type=int, default=13)
+    arguments = parser.parse_args()
+    airframe = load_airframe("uh60a_class")
+    heights_ft = np.linspace(0.0, 800.0, arguments.heights)
+    speeds_kt = np.linspace(0.0, 120.0, arguments.speeds)
+    cells = [(h, v) for h in heights_ft for v in speeds_kt]
+    results: dict[str, list] = {}
+    for name, settings in VARIANTS.items():
+        planner = get_planner(airframe, settings)
+        started = time.perf_counter()
+        plans = [planner.plan(initial_state_after_failure(airframe, h * FT, v * KT)) for h, v in cells]
+        results[name] = [plans, time.perf_counter() - started]
+    reference_unsafe = np.array([plan.status != "safe" for plan in results[REFERENCE][0]])
+    print(f"{len(cells)} cells: heights 0-800 ft x {arguments.heights}, speeds 0-120 kt x {arguments.speeds}")
+    header = (
+        f"{'variant':32s} {'NLP-safe':>8s} {'replay fails':>13s} {'fail %':>7s} {'safe':>5s} {'failed':>6s} "
+        f"{'safe but ref unsafe':>19s} {'median ms':>9s} {'p95 ms':>7s} {'total s':>7s}"
+    )
+    print(header)
+    for name, (plans, total_s) in results.items():
+        nlp_safe = np.array([plan.value <= 0.0 and plan.solver.success for plan in plans])
+        replay_fails = nlp_safe & np.array([not plan.verified for plan in plans])
+        safe = np.array([plan.safe for plan in plans])
+        failed = sum(plan.status == "failed" for plan in plans)
+        claimed_safe = nlp_safe if name.startswith("paper") else safe
+        optimistic = int(np.sum(claimed_safe & reference_unsafe))
+        times = np.array([plan.solver.solve_time_ms for plan in plans])
+        share = 100.0 * replay_fails.sum() / max(nlp_safe.sum(), 1)
+        print(
+            f"{name:32s} {nlp_safe.sum():8d} {replay_fails.sum():13d} {share:6.1f}% {safe.sum():5d} {failed:6d} "
+            f"{optimistic:19d} {np.median(times):9.1f} {np.percentile(times, 95):7.1f} {total_s:7.1f}"
+        )
+    print("\n'safe but ref unsafe' counts cells a variant would call safe (paper: by its NLP value, as the paper does;")
+    print("verified: after its replay check) that the reference calls unsafe or unverified.")
+
+
+if __name__ == "__main__":
+    main()
