@@ -11,14 +11,16 @@ pre-Jazzy integer enums and rejects the file.
 Crash safety: data is chunked, and everything the MCAP writer emits (a completed chunk and its
 message index) is handed to the operating system immediately. A recorder killed with SIGKILL leaves
 a file without summary/footer whose completed chunks :func:`read_log` recovers with
-``allow_truncated=True``. ``mcap.reader.make_reader(...).iter_messages()`` cannot open such a file
-(it needs the footer); ``mcap.reader.NonSeekingReader`` reads it up to the incomplete tail.
+``allow_truncated=True``. ``mcap.reader.make_reader(...).iter_messages()`` raises ``McapError`` on
+such a file (its seeking reader starts from the footer); ``mcap.reader.NonSeekingReader`` reads it
+up to the incomplete tail.
 
 This module must not import rclpy: it is used by offline tools and tests.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import sys
@@ -37,12 +39,14 @@ from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
 __all__ = [
     "LoggedMessage",
+    "LoggedTopic",
     "McapLogError",
     "McapLogWriter",
     "QosDescription",
     "message_definition",
     "read_log",
     "read_log_metadata",
+    "read_log_topics",
     "type_description_hash",
 ]
 
@@ -57,10 +61,10 @@ _MCAP_MAGIC = b"\x89MCAP0\r\n"
 _INFINITE_DURATION = {"sec": 9223372036, "nsec": 854775807}
 _INT64_MAX = 2**63 - 1
 _COMPRESSION = {"none": CompressionType.NONE, "lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD}
-# Pre-Jazzy (metadata version <= 8) bags store the rmw enum values as integers.
-_LEGACY_RELIABILITY = {1: "reliable", 2: "best_effort"}
-_LEGACY_DURABILITY = {1: "transient_local", 2: "volatile"}
-_LEGACY_HISTORY = {1: "keep_last", 2: "keep_all"}
+# rmw's policy enums: pre-Jazzy bags (metadata version <= 8) store the integer values.
+_RMW_RELIABILITY = {0: "system_default", 1: "reliable", 2: "best_effort", 3: "unknown", 4: "best_available"}
+_RMW_DURABILITY = {0: "system_default", 1: "transient_local", 2: "volatile", 3: "unknown", 4: "best_available"}
+_RMW_HISTORY = {0: "system_default", 1: "keep_last", 2: "keep_all", 3: "unknown"}
 _DEFAULT_DEPTH = 10  # rosbag2's default history depth when a profile does not carry one
 
 
@@ -120,9 +124,7 @@ class QosDescription:
     def to_rosbag2_yaml(self) -> str:
         """Return the ``offered_qos_profiles`` YAML list (one profile) as rosbag2 writes it."""
         # yaml-cpp's Dump (used by rosbag2) emits block style without a trailing newline.
-        return yaml.safe_dump([self.to_rosbag2_dict()], sort_keys=False, default_flow_style=False).rstrip(
-            "\n"
-        )
+        return yaml.safe_dump([self.to_rosbag2_dict()], sort_keys=False, default_flow_style=False).rstrip("\n")
 
     @classmethod
     def from_rosbag2_yaml(cls, text: str) -> QosDescription:
@@ -152,23 +154,30 @@ class QosDescription:
         if not profiles:
             return cls()
         profile = profiles[0]
-        history = _policy(profile.get("history", "keep_last"), _LEGACY_HISTORY)
+        history = _policy(profile.get("history", "keep_last"), _RMW_HISTORY)
         depth = profile.get("depth", 0)
         if history != "keep_last" or not isinstance(depth, int) or depth < 1:
             depth = _DEFAULT_DEPTH
+        # Collapse rmw's other values onto the two that matter: system default and unknown are
+        # RELIABLE/VOLATILE in every Tier-1 rmw; "best available" turns into the stronger policy.
+        reliability = _policy(profile.get("reliability", "reliable"), _RMW_RELIABILITY)
+        durability = _policy(profile.get("durability", "volatile"), _RMW_DURABILITY)
         return cls(
-            reliability=_policy(profile.get("reliability", "reliable"), _LEGACY_RELIABILITY),
-            durability=_policy(profile.get("durability", "volatile"), _LEGACY_DURABILITY),
+            reliability="best_effort" if reliability == "best_effort" else "reliable",
+            durability="transient_local" if durability in ("transient_local", "best_available") else "volatile",
             depth=depth,
         )
 
 
-def _policy(value: object, legacy: Mapping[int, str]) -> str:
+def _policy(value: object, names: Mapping[int, str]) -> str:
     if isinstance(value, int) and not isinstance(value, bool):
-        if value not in legacy:
+        if value not in names:
             raise ValueError(f"unsupported QoS policy value {value}")
-        return legacy[value]
-    return str(value).lower()
+        return names[value]
+    text = str(value).lower()
+    if text not in names.values():
+        raise ValueError(f"unsupported QoS policy value {value!r}")
+    return text
 
 
 class LoggedMessage(NamedTuple):
@@ -189,6 +198,20 @@ class LoggedMessage(NamedTuple):
     log_time_ns: int
     publish_time_ns: int
     qos: QosDescription
+
+
+class LoggedTopic(NamedTuple):
+    """A topic present in a log.
+
+    Attributes:
+        type_name: ``pkg/msg/Type``.
+        qos: The QoS the publisher offered.
+        message_count: Messages logged on the topic.
+    """
+
+    type_name: str
+    qos: QosDescription
+    message_count: int
 
 
 # --- message definitions, the way rosbag2's LocalMessageDefinitionSource builds them -------------
@@ -286,9 +309,7 @@ def message_definition(type_name: str) -> tuple[str, str]:
         except FileNotFoundError as exc:
             missing = str(exc)
     searched = ", ".join(str(p) for p in _share_dirs(type_name.split("/", 1)[0]))
-    raise McapLogError(
-        f"no .msg/.idl definition found for {missing} (needed by {type_name}); searched {searched}"
-    )
+    raise McapLogError(f"no .msg/.idl definition found for {missing} (needed by {type_name}); searched {searched}")
 
 
 def type_description_hash(type_name: str) -> str:
@@ -297,8 +318,6 @@ def type_description_hash(type_name: str) -> str:
     Args:
         type_name: ``pkg/msg/Type``.
     """
-    import json  # only needed here; keeps module import light
-
     path = _interface_file(type_name, ".json")
     if path is None:
         return ""
@@ -363,13 +382,17 @@ class McapLogWriter:
             self._file: BinaryIO = open(self._path, "wb")  # closed in close()
         except OSError as exc:
             raise McapLogError(f"cannot create log: {exc.strerror}", path) from exc
-        self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression])
-        self._writer.start(profile="ros2", library=f"helireach_ros.mcap_log; {LIBRARY_IDENTIFIER}")
-        # rosbag2 writes its metadata at open too, so a killed recording still identifies itself.
-        self._write_rosbag2_metadata()
-        if self._custom:
-            self._writer.add_metadata("helireach", dict(self._custom))
-        self._sync()
+        try:
+            self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression])
+            self._writer.start(profile="ros2", library=f"helireach_ros.mcap_log; {LIBRARY_IDENTIFIER}")
+            # rosbag2 writes its metadata at open too, so a killed recording still identifies itself.
+            self._write_rosbag2_metadata()
+            if self._custom:
+                self._writer.add_metadata("helireach", dict(self._custom))
+            self._sync()
+        except BaseException:
+            self._file.close()
+            raise
 
     @property
     def path(self) -> Path:
@@ -380,6 +403,11 @@ class McapLogWriter:
     def closed(self) -> bool:
         """Whether :meth:`close` has run."""
         return self._closed
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far."""
+        return self._message_count
 
     def __enter__(self) -> McapLogWriter:
         return self
@@ -572,8 +600,8 @@ def _open_summary(path: Path, stream: BinaryIO, allow_truncated: bool) -> Seekin
         if _has_footer(stream):
             stream.seek(0)
             reader = SeekingReader(stream, validate_crcs=True)
-            reader.get_summary()
-            return reader
+            # A finished file may legitimately have no summary section: scan it then.
+            return reader if reader.get_summary() is not None else None
         problem = "no MCAP footer/summary (the recording was not closed)"
     except Exception as exc:  # the mcap library raises several types on damaged input
         problem = f"unreadable MCAP footer/summary ({exc.__class__.__name__}: {exc})"
@@ -586,8 +614,8 @@ def _open_summary(path: Path, stream: BinaryIO, allow_truncated: bool) -> Seekin
     return None
 
 
-def _scan_records(stream: BinaryIO) -> Iterator[Any]:
-    """Yield records in file order up to the first incomplete or damaged one."""
+def _scan_records(path: Path, stream: BinaryIO, allow_truncated: bool) -> Iterator[Any]:
+    """Yield records in file order; stop at (or raise on) the first incomplete or damaged one."""
     stream.seek(0)
     records = StreamReader(stream, skip_magic=False, validate_crcs=True).records
     while True:
@@ -595,8 +623,10 @@ def _scan_records(stream: BinaryIO) -> Iterator[Any]:
             record = next(records)
         except StopIteration:
             return
-        except Exception:  # a killed writer leaves a partial record at the end
-            return
+        except Exception as exc:  # a killed writer leaves a partial record at the end
+            if allow_truncated:
+                return
+            raise McapLogError(f"corrupt MCAP data ({exc.__class__.__name__}: {exc})", path) from exc
         yield record
 
 
@@ -639,7 +669,7 @@ def read_log(path: str | os.PathLike[str], *, allow_truncated: bool = False) -> 
         stream.close()
         raise
     if reader is None:
-        return _iter_scanned(log_path, stream)
+        return _iter_scanned(log_path, stream, allow_truncated)
     return _iter_indexed(log_path, stream, reader, allow_truncated)
 
 
@@ -665,12 +695,12 @@ def _iter_indexed(
             yield _logged(info, message)
 
 
-def _iter_scanned(path: Path, stream: BinaryIO) -> Iterator[LoggedMessage]:
+def _iter_scanned(path: Path, stream: BinaryIO, allow_truncated: bool) -> Iterator[LoggedMessage]:
     schemas: dict[int, Schema] = {}
     channels: dict[int, _ChannelInfo] = {}
     collected: list[LoggedMessage] = []
     with stream:
-        for record in _scan_records(stream):
+        for record in _scan_records(path, stream, allow_truncated):
             if isinstance(record, Schema):
                 schemas[record.id] = record
             elif isinstance(record, Channel):
@@ -688,9 +718,7 @@ def _logged(info: _ChannelInfo, message: Message) -> LoggedMessage:
     )
 
 
-def read_log_metadata(
-    path: str | os.PathLike[str], *, allow_truncated: bool = False
-) -> dict[str, dict[str, str]]:
+def read_log_metadata(path: str | os.PathLike[str], *, allow_truncated: bool = False) -> dict[str, dict[str, str]]:
     """Return the MCAP metadata records of a log by name (a later record wins).
 
     Besides the ``helireach`` record this includes rosbag2's ``rosbag2`` record.
@@ -713,7 +741,43 @@ def read_log_metadata(
                 problem = f"corrupt MCAP metadata ({exc.__class__.__name__}: {exc})"
                 raise McapLogError(problem, log_path) from exc
         else:
-            records = [r for r in _scan_records(stream) if isinstance(r, Metadata)]
+            records = [r for r in _scan_records(log_path, stream, allow_truncated) if isinstance(r, Metadata)]
     for record in records:
         result[record.name] = dict(record.metadata)
     return result
+
+
+def read_log_topics(path: str | os.PathLike[str], *, allow_truncated: bool = False) -> dict[str, LoggedTopic]:
+    """Return the topics of a log (type, offered QoS, message count) without reading the messages.
+
+    Args:
+        path: The ``.mcap`` file.
+        allow_truncated: As for :func:`read_log` (a truncated file is scanned, so this reads it all).
+
+    Raises:
+        McapLogError: The file is missing, not MCAP, truncated or corrupt.
+    """
+    log_path = Path(path)
+    with _open_log(log_path) as stream:
+        reader = _open_summary(log_path, stream, allow_truncated)
+        if reader is not None:
+            summary = reader.get_summary()
+            assert summary is not None  # _open_summary returns a reader only when there is one
+            counts = summary.statistics.channel_message_counts if summary.statistics else {}
+            schemas = summary.schemas
+            channels = summary.channels.values()
+        else:
+            schemas, channel_list, counts = {}, [], {}
+            for record in _scan_records(log_path, stream, allow_truncated):
+                if isinstance(record, Schema):
+                    schemas[record.id] = record
+                elif isinstance(record, Channel):
+                    channel_list.append(record)
+                elif isinstance(record, Message):
+                    counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+            channels = channel_list
+        topics: dict[str, LoggedTopic] = {}
+        for channel in channels:
+            info = _channel_info(log_path, channel, schemas.get(channel.schema_id))
+            topics[info.topic] = LoggedTopic(info.type_name, info.qos, counts.get(channel.id, 0))
+    return topics
