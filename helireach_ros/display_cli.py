@@ -1,0 +1,57 @@
+"""``helireach display``: serve the cockpit page (H-V diagram, status banner, landing plan) from a ROS 2 node.
+
+The page is at ``http://127.0.0.1:8080/`` by default; only an explicit ``--bind`` makes it listen on anything
+but loopback. ``--hold`` keeps the page up after Ctrl-C/SIGTERM stops ROS (last data shown, banner NO DATA,
+marked held) until a second Ctrl-C/SIGTERM. Options left out keep the node's parameter defaults
+(see :class:`helireach_ros.nodes.display.CockpitDisplay`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+__all__ = ["register", "run"]
+
+
+def register(subparsers: Any) -> None:
+    """Adds ``helireach display`` to the ``helireach`` command's subparsers."""
+    parser = subparsers.add_parser(
+        "display",
+        help="serve the live cockpit page (H-V diagram, safety status, landing plan)",
+        description=(
+            "Serve a read-only web page that shows the H-V envelope, the aircraft's operating point, "
+            "the /helireach/safety_status banner and, after an engine failure, the landing plan."
+        ),
+    )
+    parser.add_argument("--port", type=int, default=None, help="TCP port (default 8080; 0 = any free port)")
+    parser.add_argument(
+        "--bind", default=None, help="listen address (default 127.0.0.1; e.g. 0.0.0.0 exposes it to the network)"
+    )
+    parser.add_argument("--envelope", default=None, metavar="FILE", help="H-V envelope file (default: shipped one)")
+    parser.add_argument("--airframe", default=None, help="airframe for rotor limits (default: the envelope's)")
+    parser.add_argument("--state-topic", default=None, help="nav_msgs/Odometry state topic (default /helireach/state)")
+    parser.add_argument(
+        "--stale-after", type=float, default=None, metavar="S", help="NO DATA after S s of silence (default 2)"
+    )
+    parser.add_argument("--hold", action="store_true", help="keep serving the last data after ROS stops")
+    parser.set_defaults(handler=run)
+
+
+def run(arguments: argparse.Namespace) -> int:
+    """Handler of ``helireach display``; returns the exit code (1 if the page cannot be served)."""
+    from rclpy.parameter import Parameter
+
+    from helireach_ros.nodes.display import run_display
+
+    given = {
+        "port": arguments.port,
+        "bind": arguments.bind,
+        "envelope_file": arguments.envelope,
+        "airframe": arguments.airframe,
+        "state_topic": arguments.state_topic,
+        "stale_after_s": arguments.stale_after,
+    }
+    overrides = [Parameter(name, value=value) for name, value in given.items() if value is not None]
+    # args=[]: the helireach command line is not a ROS command line
+    return run_display(args=[], parameter_overrides=overrides, hold=arguments.hold)

@@ -1,0 +1,672 @@
+// helireach cockpit display: receives JSON frames (SI units) over a WebSocket from helireach_ros.nodes.display
+// and draws them. Read-only: the page never sends anything. The banner follows /helireach/safety_status only;
+// the server decides staleness, and the page also shows NO DATA when its own link goes quiet or drops.
+"use strict";
+
+(() => {
+  const LEVEL_WORDS = { safe: "SAFE", caution: "CAUTION", avoid: "AVOID", nodata: "NO DATA" };
+  const DEFAULT_STALE_S = 2.0; // until the server's config arrives
+  const TRAIL_SECONDS = 20.0;
+  const TRAIL_SPACING_MS = 200;
+  const TRAIL_GAP_MS = 1000;
+  const DEFAULT_AXES = { speedKt: 160, heightFt: 1000 }; // when no envelope is loaded
+  const RECONNECT_MIN_MS = 500;
+  const RECONNECT_MAX_MS = 5000;
+  const COLORS = {
+    grid: "#26313c",
+    axis: "#9aa7b4",
+    text: "#e8ecf0",
+    avoid: "rgba(224, 0, 0, 0.55)",
+    avoidEdge: "#ff5050",
+    boundary: "#ffffff",
+    plan: "#ff40ff",
+    aircraft: "#ffffff",
+    trail: "#35d0ff",
+    stale: "#8a939e",
+    collective: "#35d0ff",
+    pitch: "#ffd54f",
+    rotorBand: "#00c853",
+    rotorBad: "#e00000",
+  };
+
+  const model = {
+    config: null,
+    envelope: null,
+    plan: null,
+    live: null,
+    link: "connecting",
+    lastMessageAt: 0,
+    trail: [], // {t, speedKt, heightFt, broken (no line from the previous point)}
+    trailBroken: false,
+  };
+  // What the page currently shows, for people debugging and for the acceptance test.
+  const view = { banner: "nodata", bannerDetail: "", marker: null, plan: { shown: false, pathPoints: 0 }, frames: 0, link: "connecting" };
+  window.helireach = view;
+
+  const $ = (id) => document.getElementById(id);
+  const ft = (meters) => meters / unit("m_per_ft", 0.3048);
+  const kt = (metersPerSecond) => metersPerSecond / unit("ms_per_kt", 1852 / 3600);
+  const isNum = (x) => typeof x === "number" && Number.isFinite(x);
+
+  function unit(name, fallback) {
+    const units = model.config && model.config.units;
+    return units && isNum(units[name]) ? units[name] : fallback;
+  }
+
+  function staleMs() {
+    const seconds = model.config && isNum(model.config.stale_after_s) ? model.config.stale_after_s : DEFAULT_STALE_S;
+    return seconds * 1000;
+  }
+
+  function fmt(x, digits = 0, signed = false) {
+    if (!isNum(x)) return "---";
+    const text = Math.abs(x).toFixed(digits);
+    if (Number(text) === 0) return (0).toFixed(digits);
+    return (x < 0 ? "\u2212" : signed ? "+" : "") + text;
+  }
+
+  // ---- WebSocket --------------------------------------------------------------------------------------
+  let reconnectMs = RECONNECT_MIN_MS;
+
+  function connect() {
+    const scheme = location.protocol === "https:" ? "wss:" : "ws:";
+    let socket;
+    try {
+      socket = new WebSocket(`${scheme}//${location.host}/ws`);
+    } catch (error) {
+      scheduleReconnect();
+      return;
+    }
+    socket.onopen = () => {
+      model.link = "up";
+      model.lastMessageAt = performance.now();
+      reconnectMs = RECONNECT_MIN_MS;
+    };
+    socket.onmessage = (event) => {
+      let frame;
+      try {
+        frame = JSON.parse(event.data);
+      } catch (error) {
+        return; // a broken frame is ignored; silence then turns the banner to NO DATA
+      }
+      applyFrame(frame);
+    };
+    socket.onclose = () => {
+      model.link = "down";
+      updateDom();
+      scheduleReconnect();
+    };
+    socket.onerror = () => socket.close();
+  }
+
+  function scheduleReconnect() {
+    setTimeout(connect, reconnectMs);
+    reconnectMs = Math.min(reconnectMs * 2, RECONNECT_MAX_MS);
+  }
+
+  function applyFrame(frame) {
+    model.lastMessageAt = performance.now();
+    model.link = "up";
+    if ("config" in frame) model.config = frame.config;
+    if ("envelope" in frame) model.envelope = frame.envelope;
+    if ("plan" in frame) model.plan = frame.plan;
+    if ("live" in frame) model.live = frame.live;
+    view.frames += 1;
+    extendTrail();
+    updateDom();
+    requestDraw();
+  }
+
+  function extendTrail() {
+    const state = model.live && model.live.state;
+    const now = performance.now();
+    if (!state || state.stale || !isNum(state.height_m) || !isNum(state.speed_ms)) {
+      model.trailBroken = true; // do not join the track across a gap in the data
+    } else {
+      const last = model.trail[model.trail.length - 1];
+      if (!last || now - last.t >= TRAIL_SPACING_MS) {
+        const broken = model.trailBroken || (last && now - last.t > TRAIL_GAP_MS);
+        model.trail.push({ t: now, speedKt: kt(state.speed_ms), heightFt: ft(state.height_m), broken });
+        model.trailBroken = false;
+      }
+    }
+    while (model.trail.length && now - model.trail[0].t > TRAIL_SECONDS * 1000) model.trail.shift();
+  }
+
+  // ---- banner and readouts (DOM) -----------------------------------------------------------------------
+  function bannerState() {
+    const now = performance.now();
+    if (model.link !== "up") {
+      return { level: "nodata", detail: model.link === "down" ? "DISPLAY LINK LOST \u2014 RECONNECTING" : "CONNECTING", link: model.link };
+    }
+    const quietMs = now - model.lastMessageAt;
+    if (quietMs > staleMs()) {
+      return { level: "nodata", detail: `NO DATA FROM DISPLAY SERVER FOR ${(quietMs / 1000).toFixed(1)} s`, link: "quiet" };
+    }
+    const status = model.live && model.live.status;
+    if (!status) return { level: "nodata", detail: "NO SAFETY STATUS", link: "up" };
+    const level = Object.prototype.hasOwnProperty.call(LEVEL_WORDS, status.level) ? status.level : "nodata";
+    let detail = (status.message || "").toUpperCase();
+    if (level === "nodata" && status.last_level && isNum(status.age_s)) {
+      detail += ` \u00b7 LAST ${LEVEL_WORDS[status.last_level] || "?"} ${status.age_s.toFixed(1)} s AGO`;
+    }
+    if (model.live.held) detail = "HELD \u2014 ROS STOPPED \u00b7 " + detail;
+    if (status.envelope_mismatch) detail = "ENVELOPE MISMATCH \u00b7 " + detail;
+    return { level, detail, link: "up" };
+  }
+
+  function updateDom() {
+    const banner = bannerState();
+    const bannerElement = $("banner");
+    if (bannerElement.dataset.level !== banner.level) bannerElement.dataset.level = banner.level;
+    $("banner-word").textContent = LEVEL_WORDS[banner.level];
+    $("banner-detail").textContent = banner.detail;
+    view.banner = banner.level;
+    view.bannerDetail = banner.detail;
+    view.link = banner.link;
+
+    const status = model.live && model.live.status;
+    $("margin-value").textContent = banner.level !== "nodata" && status ? fmt(status.margin, 0, true) : "---";
+
+    const link = $("link-state");
+    link.dataset.link = banner.link;
+    link.textContent = `LINK: ${banner.link.toUpperCase()}`;
+
+    updateReadouts();
+    updatePlanPanel();
+    updateFooter();
+  }
+
+  function updateReadouts() {
+    const state = model.live && model.live.state;
+    const stale = !state || state.stale || model.link !== "up";
+    $("height-value").textContent = state ? fmt(ft(state.height_m)) : "---";
+    $("speed-value").textContent = state ? fmt(kt(state.speed_ms)) : "---";
+    $("climb-value").textContent = state && isNum(state.climb_ms) ? fmt(ft(state.climb_ms) * 60, 0, true) : "---";
+    $("state-age").textContent = !state ? "NO STATE" : state.stale ? `STALE ${fmt(state.age_s, 1)} s` : "LIVE";
+    document.querySelector(".readouts").classList.toggle("stale", stale);
+
+    const rotor = model.live && model.live.rotor;
+    const limits = model.config && model.config.rotor_limits;
+    const rotorPanel = document.querySelector(".rotor");
+    if (!rotor || !isNum(rotor.speed_rad_s)) {
+      $("rotor-value").textContent = "---";
+      $("rotor-rpm").textContent = rotor ? "NO MAIN ROTOR SPEED" : "NO ROTOR DATA";
+      rotorPanel.dataset.state = "none";
+    } else {
+      const rpm = (rotor.speed_rad_s * 60) / (2 * Math.PI);
+      $("rotor-value").textContent = limits ? fmt((100 * rotor.speed_rad_s) / limits.nominal_rad_s) : "---";
+      $("rotor-rpm").textContent = `${fmt(rpm)} rpm` + (rotor.stale ? " \u00b7 STALE" : "") + (limits ? "" : " \u00b7 NO LIMITS");
+      rotorPanel.dataset.state = !limits ? "none" : rotor.speed_rad_s < limits.min_rad_s ? "low" : rotor.speed_rad_s > limits.max_rad_s ? "high" : "ok";
+    }
+  }
+
+  function planState() {
+    const plan = model.plan;
+    if (!plan) return "none";
+    if (!plan.trajectory) return "planning";
+    if (plan.trajectory.error) return "error";
+    return "shown";
+  }
+
+  function updatePlanPanel() {
+    const state = planState();
+    const panel = $("plan-panel");
+    panel.dataset.state = state;
+    const badge = $("plan-badge");
+    $("plan-idle").hidden = state === "shown";
+    $("plan-body").hidden = state !== "shown";
+    if (state === "none") $("plan-idle").textContent = "ENGINE NORMAL \u00b7 NO PLAN";
+    if (state === "planning") $("plan-idle").textContent = "ENGINE FAILURE \u00b7 PLANNING\u2026";
+    if (state === "error") $("plan-idle").textContent = `PLAN UNREADABLE: ${model.plan.trajectory.error}`.toUpperCase();
+    view.plan.shown = state === "shown";
+    view.plan.state = state;
+    if (state !== "shown") {
+      badge.hidden = true;
+      return;
+    }
+    const status = model.plan.status;
+    let kind = "unverified";
+    let text = "UNVERIFIED";
+    if (status && status.fallback === true) {
+      kind = "fallback";
+      text = "FALLBACK";
+    } else if (status && (status.safe === false || status.level === "avoid")) {
+      kind = "unsafe";
+      text = "UNSAFE";
+    } else if (status && status.verified === true) {
+      kind = "verified";
+      text = "VERIFIED";
+    }
+    badge.hidden = false;
+    badge.dataset.kind = kind;
+    badge.textContent = text;
+    view.plan.badge = text;
+
+    const clock = model.live && model.live.plan_clock;
+    $("touchdown-value").textContent = clock ? fmt(clock.time_to_touchdown_s, 1) : "---";
+    view.plan.timeToTouchdown = clock ? clock.time_to_touchdown_s : null;
+    const details = [];
+    if (status && isNum(status.time_to_land_s)) details.push(`plan ${fmt(status.time_to_land_s, 1)} s`);
+    if (status && isNum(status.solve_time_ms)) details.push(`solve ${fmt(status.solve_time_ms)} ms`);
+    if (status && isNum(status.value)) details.push(`value ${fmt(status.value, 3, true)}`);
+    if (status && status.message) details.push(status.message);
+    if (!status) details.push("no plan status");
+    $("plan-detail").textContent = details.join(" \u00b7 ");
+  }
+
+  function updateFooter() {
+    const config = model.config;
+    const envelope = model.envelope;
+    $("airframe-label").textContent = config && config.airframe ? `AIRFRAME ${config.airframe.toUpperCase()}` : "";
+    $("status-source").textContent = config && config.state_topic ? `STATE ${config.state_topic}` : "";
+    const failure = model.live && model.live.failure;
+    const failureLabel = $("failure-label");
+    failureLabel.hidden = !failure;
+    if (failure) failureLabel.textContent = `ENGINE FAILURE T+${fmt(failure.age_s, 1)} s`;
+    let label = "no envelope";
+    if (envelope && envelope.available) {
+      label = `envelope ${envelope.envelope_id}` + (envelope.method ? ` \u00b7 ${envelope.method}` : "");
+      if (isNum(envelope.power_fraction)) label += ` \u00b7 power ${fmt(100 * envelope.power_fraction)} %`;
+    } else if (envelope) {
+      label = "envelope unavailable";
+    }
+    $("envelope-label").textContent = label;
+    $("hv-nodata").hidden = !envelope || envelope.available;
+    if (envelope && !envelope.available) $("hv-nodata-reason").textContent = `${envelope.file}: ${envelope.reason}`;
+  }
+
+  // ---- canvases ----------------------------------------------------------------------------------------
+  let drawPending = false;
+
+  function requestDraw() {
+    if (drawPending) return;
+    drawPending = true;
+    requestAnimationFrame(() => {
+      drawPending = false;
+      drawHv();
+      drawRotor();
+      drawPlanCharts();
+    });
+  }
+
+  function prepareCanvas(canvas) {
+    const ratio = window.devicePixelRatio || 1;
+    const width = Math.max(canvas.clientWidth, 1);
+    const height = Math.max(canvas.clientHeight, 1);
+    if (canvas.width !== Math.round(width * ratio) || canvas.height !== Math.round(height * ratio)) {
+      canvas.width = Math.round(width * ratio);
+      canvas.height = Math.round(height * ratio);
+    }
+    const context = canvas.getContext("2d");
+    context.setTransform(ratio, 0, 0, ratio, 0, 0);
+    context.clearRect(0, 0, width, height);
+    return { context, width, height };
+  }
+
+  function niceStep(range, targetTicks) {
+    const raw = range / Math.max(targetTicks, 1);
+    const power = Math.pow(10, Math.floor(Math.log10(raw)));
+    for (const multiple of [1, 2, 2.5, 5, 10]) if (multiple * power >= raw) return multiple * power;
+    return 10 * power;
+  }
+
+  function hatchPattern(context) {
+    const tile = document.createElement("canvas");
+    tile.width = 10;
+    tile.height = 10;
+    const tileContext = tile.getContext("2d");
+    tileContext.strokeStyle = "rgba(150, 160, 172, 0.7)";
+    tileContext.lineWidth = 2;
+    tileContext.beginPath();
+    tileContext.moveTo(0, 10);
+    tileContext.lineTo(10, 0);
+    tileContext.stroke();
+    return context.createPattern(tile, "repeat");
+  }
+
+  function drawAxes(context, frame, xMax, yMax, xTitle, yTitle, xStep, yStep, fontPx) {
+    context.strokeStyle = COLORS.grid;
+    context.lineWidth = 1;
+    context.fillStyle = COLORS.axis;
+    context.font = `bold ${fontPx}px "DejaVu Sans", "Liberation Sans", Arial, sans-serif`;
+    context.textAlign = "center";
+    context.textBaseline = "top";
+    for (let x = 0; x <= xMax + 1e-9; x += xStep) {
+      const px = frame.x(x);
+      context.beginPath();
+      context.moveTo(px, frame.top);
+      context.lineTo(px, frame.bottom);
+      context.stroke();
+      context.fillText(String(Math.round(x * 10) / 10), px, frame.bottom + 6);
+    }
+    context.textAlign = "right";
+    context.textBaseline = "middle";
+    for (let y = 0; y <= yMax + 1e-9; y += yStep) {
+      const py = frame.y(y);
+      context.beginPath();
+      context.moveTo(frame.left, py);
+      context.lineTo(frame.right, py);
+      context.stroke();
+      context.fillText(String(Math.round(y * 1000) / 1000), frame.left - 8, py);
+    }
+    context.strokeStyle = COLORS.axis;
+    context.lineWidth = 2;
+    context.strokeRect(frame.left, frame.top, frame.right - frame.left, frame.bottom - frame.top);
+    context.fillStyle = COLORS.text;
+    context.textAlign = "center";
+    context.textBaseline = "bottom";
+    if (xTitle) context.fillText(xTitle, (frame.left + frame.right) / 2, frame.bottom + 2.6 * fontPx + 8);
+    if (yTitle) {
+      context.save();
+      context.translate(frame.left - 3.2 * fontPx, (frame.top + frame.bottom) / 2);
+      context.rotate(-Math.PI / 2);
+      context.textBaseline = "middle";
+      context.fillText(yTitle, 0, 0);
+      context.restore();
+    }
+  }
+
+  function makeFrame(left, top, right, bottom, xMin, xMax, yMin, yMax) {
+    const sx = (right - left) / (xMax - xMin || 1);
+    const sy = (bottom - top) / (yMax - yMin || 1);
+    return {
+      left, top, right, bottom,
+      x: (value) => left + (value - xMin) * sx,
+      y: (value) => bottom - (value - yMin) * sy,
+    };
+  }
+
+  function drawHv() {
+    const { context, width, height } = prepareCanvas($("hv-canvas"));
+    const envelope = model.envelope && model.envelope.available ? model.envelope : null;
+    const speedsKt = envelope ? envelope.speeds_ms.map(kt) : null;
+    const heightsFt = envelope ? envelope.heights_m.map(ft) : null;
+    const xMax = envelope ? speedsKt[speedsKt.length - 1] : DEFAULT_AXES.speedKt;
+    const yMax = envelope ? heightsFt[heightsFt.length - 1] : DEFAULT_AXES.heightFt;
+    const fontPx = Math.max(14, Math.min(20, Math.round(width / 50)));
+    const frame = makeFrame(4.4 * fontPx + 8, 12, width - 16, height - 3 * fontPx - 12, 0, xMax, 0, yMax);
+    drawAxes(context, frame, xMax, yMax, "FORWARD SPEED (kt)", "HEIGHT (ft)", niceStep(xMax, 8), niceStep(yMax, 8), fontPx);
+
+    context.save();
+    context.beginPath();
+    context.rect(frame.left, frame.top, frame.right - frame.left, frame.bottom - frame.top);
+    context.clip();
+    if (envelope) drawEnvelope(context, frame, envelope, speedsKt, heightsFt, xMax, yMax);
+    drawPlanPath(context, frame);
+    drawAircraft(context, frame, xMax, yMax);
+    context.restore();
+  }
+
+  function drawEnvelope(context, frame, envelope, speedsKt, heightsFt, xMax, yMax) {
+    const hatch = hatchPattern(context);
+    const codes = envelope.status;
+    // Outside the grid is unknown, never safe.
+    context.fillStyle = hatch;
+    if (heightsFt[0] > 0) context.fillRect(frame.left, frame.y(heightsFt[0]), frame.right - frame.left, frame.y(0) - frame.y(heightsFt[0]));
+    if (speedsKt[0] > 0) context.fillRect(frame.x(0), frame.top, frame.x(speedsKt[0]) - frame.x(0), frame.bottom - frame.top);
+    // A cell is shaded by its worst corner: the status between grid nodes is never more optimistic than that.
+    for (let i = 0; i + 1 < heightsFt.length; i += 1) {
+      for (let j = 0; j + 1 < speedsKt.length; j += 1) {
+        const corners = [codes[i][j], codes[i][j + 1], codes[i + 1][j], codes[i + 1][j + 1]];
+        const worst = corners.includes(1) ? 1 : corners.includes(2) ? 2 : 0;
+        if (worst === 0) continue;
+        const x0 = frame.x(speedsKt[j]);
+        const x1 = frame.x(speedsKt[j + 1]);
+        const y0 = frame.y(heightsFt[i]);
+        const y1 = frame.y(heightsFt[i + 1]);
+        context.fillStyle = worst === 1 ? COLORS.avoid : hatch;
+        // +0.5 px overlap so neighbouring cells leave no hairline gaps
+        context.fillRect(x0 - 0.25, y1 - 0.25, x1 - x0 + 0.5, y0 - y1 + 0.5);
+      }
+    }
+    drawBoundary(context, frame, envelope);
+  }
+
+  function drawBoundary(context, frame, envelope) {
+    // The server joins the refined boundary points into segments (marching squares over the grid cells).
+    const segments = (envelope.boundary_segments || []).filter((s) => s.every(isNum));
+    const points = (envelope.boundary || []).filter((p) => isNum(p[0]) && isNum(p[1]));
+    for (const [stroke, widthPx] of [["#000000", 7], [COLORS.boundary, 3.5]]) {
+      context.strokeStyle = stroke;
+      context.lineWidth = widthPx;
+      context.lineCap = "round";
+      context.beginPath();
+      for (const [h1, v1, h2, v2] of segments) {
+        context.moveTo(frame.x(kt(v1)), frame.y(ft(h1)));
+        context.lineTo(frame.x(kt(v2)), frame.y(ft(h2)));
+      }
+      context.stroke();
+    }
+    context.fillStyle = COLORS.boundary;
+    for (const [heightM, speedMs] of points) {
+      context.beginPath();
+      context.arc(frame.x(kt(speedMs)), frame.y(ft(heightM)), 3, 0, 2 * Math.PI);
+      context.fill();
+    }
+  }
+
+  function drawPlanPath(context, frame) {
+    view.plan.pathPoints = 0;
+    const path = planState() === "shown" && model.plan.path;
+    if (!path || path.error || !path.speed_ms) return;
+    const points = [];
+    path.speed_ms.forEach((speed, index) => {
+      const heightM = path.z_m[index];
+      if (isNum(speed) && isNum(heightM)) points.push([frame.x(kt(speed)), frame.y(ft(Math.max(heightM, 0)))]);
+    });
+    if (points.length < 2) return;
+    for (const [stroke, widthPx] of [["#000000", 7], [COLORS.plan, 4]]) {
+      context.strokeStyle = stroke;
+      context.lineWidth = widthPx;
+      context.beginPath();
+      points.forEach(([x, y], index) => (index ? context.lineTo(x, y) : context.moveTo(x, y)));
+      context.stroke();
+    }
+    const [endX, endY] = points[points.length - 1];
+    context.fillStyle = COLORS.plan;
+    context.strokeStyle = "#000";
+    context.lineWidth = 2;
+    context.beginPath();
+    context.rect(endX - 7, endY - 7, 14, 14);
+    context.fill();
+    context.stroke();
+    context.fillStyle = COLORS.plan;
+    context.font = 'bold 16px "DejaVu Sans", Arial, sans-serif';
+    context.textAlign = "left";
+    context.textBaseline = "bottom";
+    context.fillText("TD", endX + 10, endY - 4);
+    view.plan.pathPoints = points.length;
+  }
+
+  function drawAircraft(context, frame, xMax, yMax) {
+    // trail: older points fainter
+    const trail = model.trail;
+    for (let index = 1; index < trail.length; index += 1) {
+      if (trail[index].broken) continue;
+      const alpha = 0.15 + 0.85 * (index / trail.length);
+      context.strokeStyle = `rgba(53, 208, 255, ${alpha.toFixed(3)})`;
+      context.lineWidth = 4;
+      context.beginPath();
+      context.moveTo(frame.x(trail[index - 1].speedKt), frame.y(trail[index - 1].heightFt));
+      context.lineTo(frame.x(trail[index].speedKt), frame.y(trail[index].heightFt));
+      context.stroke();
+    }
+    const state = model.live && model.live.state;
+    if (!state || !isNum(state.height_m) || !isNum(state.speed_ms)) {
+      view.marker = null;
+      return;
+    }
+    const speedKt = kt(state.speed_ms);
+    const heightFt = ft(state.height_m);
+    const offScale = speedKt < 0 || speedKt > xMax || heightFt < 0 || heightFt > yMax;
+    const x = frame.x(Math.min(Math.max(speedKt, 0), xMax));
+    const y = frame.y(Math.min(Math.max(heightFt, 0), yMax));
+    const stale = state.stale || model.link !== "up";
+    context.lineWidth = 3;
+    context.strokeStyle = "#000";
+    context.fillStyle = stale ? COLORS.stale : COLORS.aircraft;
+    context.beginPath();
+    context.arc(x, y, 11, 0, 2 * Math.PI);
+    if (stale || offScale) {
+      context.strokeStyle = stale ? COLORS.stale : COLORS.aircraft;
+      context.stroke();
+    } else {
+      context.fill();
+      context.stroke();
+      context.strokeStyle = COLORS.trail;
+      context.lineWidth = 3;
+      context.beginPath();
+      context.arc(x, y, 16, 0, 2 * Math.PI);
+      context.stroke();
+    }
+    // crosshair ticks
+    context.strokeStyle = stale ? COLORS.stale : COLORS.aircraft;
+    context.lineWidth = 3;
+    context.beginPath();
+    for (const [dx, dy] of [[1, 0], [-1, 0], [0, 1], [0, -1]]) {
+      context.moveTo(x + dx * 18, y + dy * 18);
+      context.lineTo(x + dx * 28, y + dy * 28);
+    }
+    context.stroke();
+    if (stale || offScale) {
+      context.fillStyle = stale ? COLORS.stale : COLORS.aircraft;
+      context.font = 'bold 16px "DejaVu Sans", Arial, sans-serif';
+      context.textAlign = "left";
+      context.textBaseline = "bottom";
+      context.fillText(stale ? "STALE" : "OFF SCALE", x + 20, y - 18);
+    }
+    view.marker = { speedKt, heightFt, x, y, stale, offScale };
+  }
+
+  function drawRotor() {
+    const { context, width, height } = prepareCanvas($("rotor-canvas"));
+    const limits = model.config && model.config.rotor_limits;
+    const rotor = model.live && model.live.rotor;
+    const lowPct = 70;
+    const highPct = 125;
+    const left = 8;
+    const right = width - 8;
+    const x = (pct) => left + ((Math.min(Math.max(pct, lowPct), highPct) - lowPct) / (highPct - lowPct)) * (right - left);
+    const barTop = 4;
+    const barHeight = height - 24;
+    context.fillStyle = limits ? COLORS.rotorBad : "#333a42";
+    context.fillRect(left, barTop, right - left, barHeight);
+    if (limits) {
+      const minPct = (100 * limits.min_rad_s) / limits.nominal_rad_s;
+      const maxPct = (100 * limits.max_rad_s) / limits.nominal_rad_s;
+      context.fillStyle = COLORS.rotorBand;
+      context.fillRect(x(minPct), barTop, x(maxPct) - x(minPct), barHeight);
+    }
+    context.fillStyle = COLORS.axis;
+    context.font = 'bold 13px "DejaVu Sans", Arial, sans-serif';
+    context.textAlign = "center";
+    context.textBaseline = "top";
+    for (let pct = 70; pct <= 125; pct += 10) context.fillText(String(pct), x(pct), barTop + barHeight + 3);
+    if (rotor && isNum(rotor.speed_rad_s) && limits) {
+      const pct = (100 * rotor.speed_rad_s) / limits.nominal_rad_s;
+      const px = x(pct);
+      context.fillStyle = rotor.stale ? COLORS.stale : "#ffffff";
+      context.strokeStyle = "#000";
+      context.lineWidth = 2;
+      context.beginPath();
+      context.moveTo(px - 9, barTop - 2);
+      context.lineTo(px + 9, barTop - 2);
+      context.lineTo(px, barTop + barHeight * 0.75);
+      context.closePath();
+      context.fill();
+      context.stroke();
+    }
+  }
+
+  function drawPlanCharts() {
+    const canvas = $("plan-canvas");
+    if (planState() !== "shown" || canvas.clientHeight < 20) return;
+    const { context, width, height } = prepareCanvas(canvas);
+    const trajectory = model.plan.trajectory;
+    const times = trajectory.t_s;
+    const lastTime = times.filter(isNum).reduce((a, b) => Math.max(a, b), 0) || 1;
+    const clock = model.live && model.live.plan_clock;
+    const elapsed = clock && isNum(clock.elapsed_s) ? clock.elapsed_s : null;
+    const gap = 34;
+    const top0 = 20;
+    const bottomReserve = 40; // time tick labels and the axis title
+    const rowHeight = (height - top0 - gap - bottomReserve) / 2;
+    const rows = [
+      { values: trajectory.collective, label: "COLLECTIVE C\u209c", color: COLORS.collective, scale: 1 },
+      { values: trajectory.pitch_rad, label: "PITCH \u03b8 (deg, + nose down)", color: COLORS.pitch, scale: 180 / Math.PI },
+    ];
+    rows.forEach((row, index) => {
+      const top = top0 + index * (rowHeight + gap);
+      const values = row.values.map((v) => (isNum(v) ? v * row.scale : null));
+      const finite = values.filter(isNum);
+      let low = Math.min(0, ...finite);
+      let high = Math.max(...finite, low + 1e-6);
+      const pad = 0.08 * (high - low);
+      low -= low < 0 ? pad : 0;
+      high += pad;
+      const frame = makeFrame(64, top, width - 10, top + rowHeight, 0, lastTime, low, high);
+      context.fillStyle = row.color;
+      context.font = 'bold 14px "DejaVu Sans", Arial, sans-serif';
+      context.textAlign = "left";
+      context.textBaseline = "bottom";
+      context.fillText(row.label, frame.left, top - 3);
+      const yStep = niceStep(high - low, 3);
+      context.strokeStyle = COLORS.grid;
+      context.fillStyle = COLORS.axis;
+      context.font = '13px "DejaVu Sans", Arial, sans-serif';
+      context.textAlign = "right";
+      context.textBaseline = "middle";
+      for (let y = Math.ceil(low / yStep) * yStep; y <= high; y += yStep) {
+        context.beginPath();
+        context.moveTo(frame.left, frame.y(y));
+        context.lineTo(frame.right, frame.y(y));
+        context.stroke();
+        context.fillText(Math.abs(y) < 1e-12 ? "0" : Number(y.toPrecision(3)).toString(), frame.left - 6, frame.y(y));
+      }
+      context.strokeStyle = COLORS.axis;
+      context.lineWidth = 1.5;
+      context.strokeRect(frame.left, frame.top, frame.right - frame.left, frame.bottom - frame.top);
+      context.strokeStyle = row.color;
+      context.lineWidth = 3;
+      context.beginPath();
+      let started = false;
+      values.forEach((value, i) => {
+        if (!isNum(value) || !isNum(times[i])) {
+          started = false;
+          return;
+        }
+        if (started) context.lineTo(frame.x(times[i]), frame.y(value));
+        else context.moveTo(frame.x(times[i]), frame.y(value));
+        started = true;
+      });
+      context.stroke();
+      if (elapsed !== null && elapsed >= 0 && elapsed <= lastTime) {
+        context.strokeStyle = COLORS.plan;
+        context.lineWidth = 2;
+        context.beginPath();
+        context.moveTo(frame.x(elapsed), frame.top);
+        context.lineTo(frame.x(elapsed), frame.bottom);
+        context.stroke();
+      }
+      if (index === rows.length - 1) {
+        context.fillStyle = COLORS.axis;
+        context.textAlign = "center";
+        context.textBaseline = "top";
+        const tStep = niceStep(lastTime, 6);
+        for (let t = 0; t <= lastTime + 1e-9; t += tStep) context.fillText(String(Math.round(t * 10) / 10), frame.x(t), frame.bottom + 4);
+        context.font = 'bold 13px "DejaVu Sans", Arial, sans-serif';
+        context.fillText("TIME SINCE PLAN START (s)", (frame.left + frame.right) / 2, frame.bottom + 21);
+      }
+    });
+  }
+
+  // The banner also depends on time (a quiet link), so re-evaluate it even without frames.
+  setInterval(() => {
+    updateDom();
+    requestDraw();
+  }, 250);
+  window.addEventListener("resize", requestDraw);
+  connect();
+  updateDom();
+})();
