@@ -698,7 +698,9 @@ class CockpitDisplay(Node):
             section = envelope_section(envelope)
         except Exception as error:  # missing module, missing/corrupt file: the page shows NO DATA, node runs on
             reason = f"{type(error).__name__}: {error}"
-            self.get_logger().error(f"H-V diagram unavailable ({path}): {reason}")
+            if str(path) not in reason:
+                reason = f"{path}: {reason}"
+            self.get_logger().error(f"H-V diagram unavailable: {reason}")
             return None, {"available": False, "reason": reason, "file": str(path)}
         self.get_logger().info(f"H-V diagram: envelope {section['envelope_id']} from {path}")
         return envelope, {**section, "file": str(path)}

@@ -150,7 +150,6 @@
     if (level === "nodata" && status.last_level && isNum(status.age_s)) {
       detail += ` \u00b7 LAST ${LEVEL_WORDS[status.last_level] || "?"} ${status.age_s.toFixed(1)} s AGO`;
     }
-    if (model.live.held) detail = "HELD \u2014 ROS STOPPED \u00b7 " + detail;
     if (status.envelope_mismatch) detail = "ENVELOPE MISMATCH \u00b7 " + detail;
     return { level, detail, link: "up" };
   }
@@ -183,7 +182,7 @@
     $("height-value").textContent = state ? fmt(ft(state.height_m)) : "---";
     $("speed-value").textContent = state ? fmt(kt(state.speed_ms)) : "---";
     $("climb-value").textContent = state && isNum(state.climb_ms) ? fmt(ft(state.climb_ms) * 60, 0, true) : "---";
-    $("state-age").textContent = !state ? "NO STATE" : state.stale ? `STALE ${fmt(state.age_s, 1)} s` : "LIVE";
+    $("state-age").textContent = !state ? "NO STATE" : state.stale ? "STALE" : "LIVE";
     document.querySelector(".readouts").classList.toggle("stale", stale);
 
     const rotor = model.live && model.live.rotor;
@@ -197,7 +196,11 @@
       const rpm = (rotor.speed_rad_s * 60) / (2 * Math.PI);
       $("rotor-value").textContent = limits ? fmt((100 * rotor.speed_rad_s) / limits.nominal_rad_s) : "---";
       $("rotor-rpm").textContent = `${fmt(rpm)} rpm` + (rotor.stale ? " \u00b7 STALE" : "") + (limits ? "" : " \u00b7 NO LIMITS");
-      rotorPanel.dataset.state = !limits ? "none" : rotor.speed_rad_s < limits.min_rad_s ? "low" : rotor.speed_rad_s > limits.max_rad_s ? "high" : "ok";
+      if (rotor.stale || model.link !== "up") rotorPanel.dataset.state = "stale";
+      else if (!limits) rotorPanel.dataset.state = "none";
+      else if (rotor.speed_rad_s < limits.min_rad_s) rotorPanel.dataset.state = "low";
+      else if (rotor.speed_rad_s > limits.max_rad_s) rotorPanel.dataset.state = "high";
+      else rotorPanel.dataset.state = "ok";
     }
   }
 
@@ -273,7 +276,7 @@
     }
     $("envelope-label").textContent = label;
     $("hv-nodata").hidden = !envelope || envelope.available;
-    if (envelope && !envelope.available) $("hv-nodata-reason").textContent = `${envelope.file}: ${envelope.reason}`;
+    if (envelope && !envelope.available) $("hv-nodata-reason").textContent = envelope.reason;
   }
 
   // ---- canvases ----------------------------------------------------------------------------------------
@@ -588,10 +591,11 @@
     const lastTime = times.filter(isNum).reduce((a, b) => Math.max(a, b), 0) || 1;
     const clock = model.live && model.live.plan_clock;
     const elapsed = clock && isNum(clock.elapsed_s) ? clock.elapsed_s : null;
-    const gap = 34;
-    const top0 = 20;
-    const bottomReserve = 40; // time tick labels and the axis title
-    const rowHeight = (height - top0 - gap - bottomReserve) / 2;
+    const compact = height < 170; // small screens: tighter rows, no axis title
+    const gap = compact ? 24 : 34;
+    const top0 = compact ? 17 : 20;
+    const bottomReserve = compact ? 20 : 40; // time tick labels (and the axis title)
+    const rowHeight = Math.max((height - top0 - gap - bottomReserve) / 2, 10);
     const rows = [
       { values: trajectory.collective, label: "COLLECTIVE C\u209c", color: COLORS.collective, scale: 1 },
       { values: trajectory.pitch_rad, label: "PITCH \u03b8 (deg, + nose down)", color: COLORS.pitch, scale: 180 / Math.PI },
@@ -605,13 +609,13 @@
       const pad = 0.08 * (high - low);
       low -= low < 0 ? pad : 0;
       high += pad;
-      const frame = makeFrame(64, top, width - 10, top + rowHeight, 0, lastTime, low, high);
+      const frame = makeFrame(54, top, width - 10, top + rowHeight, 0, lastTime, low, high);
       context.fillStyle = row.color;
       context.font = 'bold 14px "DejaVu Sans", Arial, sans-serif';
       context.textAlign = "left";
       context.textBaseline = "bottom";
       context.fillText(row.label, frame.left, top - 3);
-      const yStep = niceStep(high - low, 3);
+      const yStep = niceStep(high - low, compact ? 1.5 : 3);
       context.strokeStyle = COLORS.grid;
       context.fillStyle = COLORS.axis;
       context.font = '13px "DejaVu Sans", Arial, sans-serif';
@@ -656,7 +660,7 @@
         const tStep = niceStep(lastTime, 6);
         for (let t = 0; t <= lastTime + 1e-9; t += tStep) context.fillText(String(Math.round(t * 10) / 10), frame.x(t), frame.bottom + 4);
         context.font = 'bold 13px "DejaVu Sans", Arial, sans-serif';
-        context.fillText("TIME SINCE PLAN START (s)", (frame.left + frame.right) / 2, frame.bottom + 21);
+        if (!compact) context.fillText("TIME SINCE PLAN START (s)", (frame.left + frame.right) / 2, frame.bottom + 21);
       }
     });
   }

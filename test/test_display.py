@@ -1,0 +1,959 @@
+"""Cockpit display: the page in headless Chromium (DevTools protocol), real rclpy, real envelope and planner.
+
+In-process tests isolate DDS with ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF`` and run the ROS executor on a
+background thread while the test drives the browser; every wait is "poll until a condition holds, with a
+deadline". The cross-process test (the ``helireach display`` command) uses ``LOCALHOST`` and a random
+``ROS_DOMAIN_ID``. Screenshots go to the test's tmp dir, and to ``$HELIREACH_ARTIFACTS/`` when that is set.
+Browser tests are skipped only when no Chromium binary exists (install Debian's: ``apt-get install chromium``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import math
+import os
+import random
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import aiohttp
+import numpy as np
+import pytest
+import rclpy
+from builtin_interfaces.msg import Duration as DurationMsg
+from builtin_interfaces.msg import Time as TimeMsg
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from helireach_ros.airframe import load_airframe
+from helireach_ros.envelope import default_envelope_path, load_envelope
+from helireach_ros.nodes.display import (
+    CockpitDisplay,
+    DisplayServerError,
+    banner_level,
+    boundary_segments,
+    path_section,
+    rotor_limits_section,
+    web_directory,
+)
+from helireach_ros.units import FT, KT
+
+REPO = Path(__file__).resolve().parents[1]
+CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome-stable", "google-chrome")
+CHROMIUM_FLAGS = (
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+    "--disable-background-timer-throttling",
+    "--disable-renderer-backgrounding",
+    "--disable-backgrounding-occluded-windows",
+    "--hide-scrollbars",
+    "--window-size=1280,800",
+    "--remote-debugging-address=127.0.0.1",
+    "--remote-debugging-port=0",
+)
+VIEWPORT = {"width": 1280, "height": 800}
+TIMEOUT_S = 15.0
+CROSS_PROCESS_TIMEOUT_S = 30.0
+STALE_AFTER_S = 1.0
+LATCHED = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
+
+def find_chromium() -> str | None:
+    """The Chromium/Chrome binary ($HELIREACH_CHROMIUM, else the first on PATH), or None."""
+    explicit = os.environ.get("HELIREACH_CHROMIUM")
+    if explicit:
+        return explicit if Path(explicit).is_file() else None
+    for name in CHROMIUM_NAMES:
+        found = shutil.which(name)
+        if found:
+            return found
+    return None
+
+
+CHROMIUM = find_chromium()
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None,
+    reason="no Chromium binary found (install Debian's: apt-get install -y chromium, or set HELIREACH_CHROMIUM)",
+)
+
+
+def wait_until(condition: Callable[[], bool], timeout_s: float, what: str) -> None:
+    """Polls ``condition`` until it holds; fails naming ``what`` after ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() > deadline:
+            pytest.fail(f"timed out after {timeout_s} s waiting for {what}")
+        time.sleep(0.02)
+
+
+def save_artifact(tmp_path: Path, name: str, png: bytes) -> Path:
+    """Writes a screenshot to the test's tmp dir and, if set, to ``$HELIREACH_ARTIFACTS``."""
+    path = tmp_path / name
+    path.write_bytes(png)
+    artifacts = os.environ.get("HELIREACH_ARTIFACTS")
+    if artifacts:
+        target = Path(artifacts)
+        target.mkdir(parents=True, exist_ok=True)
+        (target / name).write_bytes(png)
+    return path
+
+
+def strict_json(text: str) -> Any:
+    """json.loads that rejects NaN/Infinity (not JSON; a browser's JSON.parse would throw)."""
+
+    def reject(constant: str) -> None:
+        raise ValueError(f"non-JSON constant {constant} in a frame")
+
+    return json.loads(text, parse_constant=reject)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Headless Chromium over the DevTools protocol (aiohttp WebSocket client)
+# ------------------------------------------------------------------------------------------------------------
+
+
+@dataclass
+class Browser:
+    """A running headless Chromium and its DevTools HTTP endpoint."""
+
+    process: subprocess.Popen
+    devtools: str  # http://127.0.0.1:PORT
+
+
+@pytest.fixture(scope="module")
+def browser() -> Iterator[Browser]:
+    if CHROMIUM is None:
+        pytest.skip("no Chromium binary found")
+    profile = tempfile.mkdtemp(prefix="helireach-chromium-")
+    process = subprocess.Popen(
+        [CHROMIUM, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "about:blank"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        port_file = Path(profile) / "DevToolsActivePort"
+        deadline = time.monotonic() + 30.0
+        while not (port_file.is_file() and port_file.read_text().strip()):
+            if process.poll() is not None or time.monotonic() > deadline:
+                pytest.fail(f"Chromium ({CHROMIUM}) did not start its DevTools endpoint")
+            time.sleep(0.05)
+        port = int(port_file.read_text().split()[0])
+        yield Browser(process, f"http://127.0.0.1:{port}")
+    finally:
+        process.terminate()
+        try:
+            process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+        shutil.rmtree(profile, ignore_errors=True)
+
+
+class DevToolsPage:
+    """One browser tab driven over its DevTools WebSocket."""
+
+    def __init__(self, http: aiohttp.ClientSession, devtools: str, target: dict[str, Any]) -> None:
+        self._http = http
+        self._devtools = devtools
+        self.target = target
+        self._socket: aiohttp.ClientWebSocketResponse | None = None
+        self._next_id = 0
+
+    @classmethod
+    async def open(cls, http: aiohttp.ClientSession, browser: Browser, url: str) -> DevToolsPage:
+        async with http.put(f"{browser.devtools}/json/new?about:blank") as response:
+            target = await response.json()
+        page = cls(http, browser.devtools, target)
+        page._socket = await http.ws_connect(target["webSocketDebuggerUrl"], max_msg_size=0)
+        await page.send("Page.enable")
+        await page.send("Runtime.enable")
+        await page.send("Emulation.setDeviceMetricsOverride", **VIEWPORT, deviceScaleFactor=1, mobile=False)
+        await page.send("Page.navigate", url=url)
+        return page
+
+    async def send(self, method: str, **params: Any) -> dict[str, Any]:
+        assert self._socket is not None
+        self._next_id += 1
+        command_id = self._next_id
+        await self._socket.send_json({"id": command_id, "method": method, "params": params})
+        while True:  # events interleave with replies; keep reading until ours
+            message = await asyncio.wait_for(self._socket.receive(), timeout=TIMEOUT_S)
+            if message.type != aiohttp.WSMsgType.TEXT:
+                raise RuntimeError(f"DevTools connection ended: {message}")
+            reply = json.loads(message.data)
+            if reply.get("id") == command_id:
+                if "error" in reply:
+                    raise RuntimeError(f"{method}: {reply['error']}")
+                return reply.get("result", {})
+
+    async def evaluate(self, expression: str) -> Any:
+        result = await self.send("Runtime.evaluate", expression=expression, returnByValue=True)
+        if "exceptionDetails" in result:
+            return None
+        return result["result"].get("value")
+
+    async def wait_for(
+        self, expression: str, predicate: Callable[[Any], bool], what: str, timeout_s: float = TIMEOUT_S
+    ) -> Any:
+        deadline = time.monotonic() + timeout_s
+        value = None
+        while time.monotonic() < deadline:
+            value = await self.evaluate(expression)
+            if value is not None and predicate(value):
+                return value
+            await asyncio.sleep(0.05)
+        pytest.fail(f"page: timed out after {timeout_s} s waiting for {what}; last {expression} = {value!r}")
+
+    async def banner(self, level: str, what: str, timeout_s: float = TIMEOUT_S, detail: str = "") -> dict[str, Any]:
+        """Waits until the banner shows ``level`` (and ``detail`` in its text); returns what it shows."""
+        expression = (
+            "({word: document.getElementById('banner-word').textContent,"
+            " level: document.getElementById('banner').dataset.level,"
+            " detail: document.getElementById('banner-detail').textContent,"
+            " margin: document.getElementById('margin-value').textContent})"
+        )
+        return await self.wait_for(
+            expression, lambda shown: shown["level"] == level and detail in shown["detail"], what, timeout_s
+        )
+
+    async def screenshot(self) -> bytes:
+        result = await self.send("Page.captureScreenshot", format="png")
+        return base64.b64decode(result["data"])
+
+    async def close(self) -> None:
+        if self._socket is not None:
+            await self._socket.close()
+        async with self._http.get(f"{self._devtools}/json/close/{self.target['id']}"):
+            pass
+
+
+# ------------------------------------------------------------------------------------------------------------
+# ROS side: the display beside a publisher of vehicle state, rotor speed and safety status
+# ------------------------------------------------------------------------------------------------------------
+
+
+def status_message(
+    level: bytes, message: str, height_m: float, speed_ms: float, margin: float, envelope_id: str
+) -> DiagnosticStatus:
+    return DiagnosticStatus(
+        level=level,
+        name="helireach: safety status",
+        message=message,
+        hardware_id="test",
+        values=[
+            KeyValue(key="height_m", value=f"{height_m:.3f}"),
+            KeyValue(key="forward_speed_m_s", value=f"{speed_ms:.3f}"),
+            KeyValue(key="margin", value=f"{margin:.3f}"),
+            KeyValue(key="envelope_id", value=envelope_id),
+        ],
+    )
+
+
+class VehicleAndStatus(Node):
+    """Publishes the state (60 Hz), rotor speed (60 Hz) and safety status (10 Hz) the test sets."""
+
+    def __init__(self, context: Context, state_topic: str = "/helireach/state") -> None:
+        super().__init__("display_test_vehicle", context=context)
+        self._lock = threading.Lock()
+        self.state: tuple[float, float, float] | None = None  # height m, speed m/s, climb m/s
+        self.rotor_speed: float | None = None
+        self.status: DiagnosticStatus | None = None
+        self.state_publisher = self.create_publisher(Odometry, state_topic, 10)
+        self.rotor_publisher = self.create_publisher(JointState, "/vehicle/rotor", 10)
+        self.status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/safety_status", LATCHED)
+        self.failure_publisher = self.create_publisher(Header, "/helireach/failure_event", RELIABLE)
+        self.trajectory_publisher = self.create_publisher(JointTrajectory, "/helireach/landing_trajectory", RELIABLE)
+        self.path_publisher = self.create_publisher(PathMsg, "/helireach/landing_path", RELIABLE)
+        self.plan_status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/plan_status", RELIABLE)
+        self.create_timer(1.0 / 60.0, self._publish_vehicle)
+        self.create_timer(0.1, self._publish_status)
+
+    def set(self, state: tuple[float, float, float] | None = None, status: DiagnosticStatus | None = None) -> None:
+        with self._lock:
+            self.state, self.status = state, status
+
+    def _publish_vehicle(self) -> None:
+        with self._lock:
+            state, rotor_speed = self.state, self.rotor_speed
+        if state is not None:
+            message = Odometry()
+            message.header.frame_id = "odom"
+            message.pose.pose.position.z = state[0]
+            message.twist.twist.linear.x = state[1]
+            message.twist.twist.linear.z = state[2]
+            self.state_publisher.publish(message)
+        if rotor_speed is not None:
+            self.rotor_publisher.publish(JointState(name=["main_rotor"], velocity=[rotor_speed]))
+
+    def _publish_status(self) -> None:
+        with self._lock:
+            status = self.status
+        if status is not None:
+            self.status_publisher.publish(status)
+
+
+class RosHarness:
+    """A fresh context, the display node and the test publisher, spun on a background thread."""
+
+    def __init__(self, **display_parameters: Any) -> None:
+        self.context = Context()
+        rclpy.init(context=self.context)
+        parameters = {"port": 0, "stale_after_s": STALE_AFTER_S, **display_parameters}
+        self.display = CockpitDisplay(
+            context=self.context, parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()]
+        )
+        self.vehicle = VehicleAndStatus(self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.display)
+        self.executor.add_node(self.vehicle)
+        self._thread = threading.Thread(target=self.executor.spin, daemon=True)
+        self._thread.start()
+        self.destroyed = False
+
+    def destroy_display(self) -> None:
+        if not self.destroyed:
+            self.executor.remove_node(self.display)
+            self.display.destroy_node()
+            self.destroyed = True
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=5.0)
+        self._thread.join(timeout=5.0)
+        self.destroy_display()
+        self.vehicle.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture(autouse=True)
+def isolated_dds(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 200)))
+
+
+# ------------------------------------------------------------------------------------------------------------
+# A real landing plan (IPOPT) as the planner node would publish it
+# ------------------------------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def real_plan() -> Any:
+    from helireach_ros.model import initial_state_after_failure
+    from helireach_ros.planner import plan_landing
+
+    airframe = load_airframe("uh60a_class")
+    plan = plan_landing(initial_state_after_failure(airframe, 500 * FT, 75 * KT), airframe)
+    assert plan.status in ("safe", "unverified", "unsafe"), plan.status
+    return plan
+
+
+def plan_messages(plan: Any, start: TimeMsg) -> tuple[JointTrajectory, PathMsg, DiagnosticStatus]:
+    """The trajectory, predicted path and plan status for ``plan``, stamped from ``start``."""
+
+    def stamp_at(seconds: float) -> TimeMsg:
+        nanoseconds = start.sec * 1_000_000_000 + start.nanosec + round(seconds * 1e9)
+        return TimeMsg(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
+
+    trajectory = JointTrajectory(joint_names=["collective_thrust_coefficient", "pitch_angle"])
+    trajectory.header.stamp = start
+    sample_times = np.linspace(0.0, plan.time_to_land, 120)
+    for t, (thrust, pitch) in zip(sample_times, plan.controls_at(sample_times).T, strict=True):
+        nanoseconds = round(float(t) * 1e9)
+        trajectory.points.append(
+            JointTrajectoryPoint(
+                positions=[float(thrust), float(pitch)],
+                time_from_start=DurationMsg(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000),
+            )
+        )
+    path = PathMsg()
+    path.header.stamp = start
+    path.header.frame_id = "failure"
+    for t, state in zip(plan.times, plan.states.T, strict=True):
+        pose = PoseStamped()
+        pose.header.stamp = stamp_at(float(t))
+        pose.header.frame_id = "failure"
+        pose.pose.position.x = float(state[4])  # z: forward distance
+        pose.pose.position.z = float(state[3])  # h: height
+        pose.pose.orientation.w = 1.0
+        path.poses.append(pose)
+    status = DiagnosticStatus(
+        level=DiagnosticStatus.OK if plan.safe else DiagnosticStatus.ERROR,
+        name="helireach: plan",
+        message=f"plan {plan.status}",
+        values=[
+            KeyValue(key="safe", value=str(plan.safe).lower()),
+            KeyValue(key="verified", value=str(plan.verified).lower()),
+            KeyValue(key="fallback", value="false"),
+            KeyValue(key="value", value=f"{plan.value:.6f}"),
+            KeyValue(key="time_to_land_s", value=f"{plan.time_to_land:.3f}"),
+            KeyValue(key="solve_time_ms", value=f"{plan.solver.solve_time_ms:.1f}"),
+        ],
+    )
+    return trajectory, path, status
+
+
+@pytest.fixture(scope="module")
+def envelope_file() -> Path:
+    """The envelope the display loads: the shipped one."""
+    path = Path(os.environ.get("HELIREACH_TEST_ENVELOPE") or default_envelope_path())
+    assert path.is_file(), f"shipped envelope {path} is missing"
+    return path
+
+
+@pytest.fixture
+def ros(envelope_file: Path) -> Iterator[RosHarness]:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    try:
+        yield harness
+    finally:
+        harness.close()
+
+
+def run_page(browser: Browser, url: str, scenario: Callable[[DevToolsPage], Any]) -> Any:
+    """Opens ``url`` in a new tab and runs ``await scenario(page)``."""
+
+    async def main() -> Any:
+        async with aiohttp.ClientSession() as http:
+            page = await DevToolsPage.open(http, browser, url)
+            try:
+                return await scenario(page)
+            finally:
+                await page.close()
+
+    return asyncio.run(main())
+
+
+def display_envelope_id(harness: RosHarness) -> str:
+    """The id of the envelope the display loaded (the status node would report the same)."""
+    return load_envelope(harness.display.get_parameter("envelope_file").value).envelope_id
+
+
+MARKER = "window.helireach && window.helireach.marker"
+PLAN = "window.helireach && window.helireach.plan"
+
+
+def near(value: float, expected: float, tolerance: float = 0.05) -> bool:
+    return value is not None and abs(value - expected) <= tolerance
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Acceptance: the page follows the safety status, the state and the plan
+# ------------------------------------------------------------------------------------------------------------
+
+
+@needs_chromium
+def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, real_plan: Any, tmp_path: Path) -> None:
+    display, vehicle = ros.display, ros.vehicle
+    envelope_id = display_envelope_id(ros)
+    cruise = (500 * FT, 75 * KT, 0.0)
+    slow = (250 * FT, 40 * KT, -1.0)
+    low = (100 * FT, 20 * KT, -2.0)
+
+    async def scenario(page: DevToolsPage) -> None:
+        shown = await page.banner("nodata", "NO DATA before any safety status")
+        assert shown["word"] == "NO DATA"
+        assert await page.evaluate("document.getElementById('hv-nodata').hidden") is True  # envelope loaded
+
+        vehicle.rotor_speed = 0.99 * 27.0
+        vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))
+        shown = await page.banner("safe", "SAFE")
+        assert (shown["word"], shown["margin"]) == ("SAFE", "+180")
+        first = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 75) and near(m["heightFt"], 500), "marker")
+
+        vehicle.set(slow, status_message(DiagnosticStatus.WARN, "near the boundary", *slow[:2], 12.0, envelope_id))
+        shown = await page.banner("caution", "CAUTION")
+        assert (shown["word"], shown["margin"]) == ("CAUTION", "+12")
+        second = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 40) and near(m["heightFt"], 250), "marker")
+        assert second["x"] < first["x"] and second["y"] > first["y"]  # slower: left; lower: down the canvas
+
+        vehicle.set(low, status_message(DiagnosticStatus.ERROR, "in the unsafe set", *low[:2], -35.0, envelope_id))
+        shown = await page.banner("avoid", "AVOID")
+        assert (shown["word"], shown["margin"]) == ("AVOID", "\u221235")
+        third = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 20) and near(m["heightFt"], 100), "marker")
+        assert third["x"] < second["x"] and third["y"] > second["y"]
+        save_artifact(tmp_path, "display-avoid.png", await page.screenshot())
+
+        vehicle.set(None, None)  # the status node (and the vehicle) fall silent
+        shown = await page.banner("nodata", "NO DATA once the status topic is silent")
+        assert shown["word"] == "NO DATA" and "silent" in shown["detail"].lower() and shown["margin"] == "---"
+        await page.wait_for(MARKER, lambda m: m["stale"], "the marker to show a stale state")
+        save_artifact(tmp_path, "display-nodata.png", await page.screenshot())
+
+        vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))
+        await page.banner("safe", "SAFE again")
+        vehicle.set(cruise, status_message(DiagnosticStatus.STALE, "no valid state", *cruise[:2], 180.0, envelope_id))
+        shown = await page.banner("nodata", "NO DATA for a STALE status")
+        assert "NO VALID STATE" in shown["detail"]
+
+        # engine failure: the planner publishes its plan; the vehicle follows it
+        vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))
+        await page.banner("safe", "SAFE before the failure")
+        assert (await page.evaluate(PLAN))["shown"] is False
+        start = vehicle.get_clock().now().to_msg()
+        trajectory, path, plan_status = plan_messages(real_plan, start)
+        for publisher in (vehicle.trajectory_publisher, vehicle.path_publisher, vehicle.plan_status_publisher):
+            wait_until(lambda publisher=publisher: publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        vehicle.failure_publisher.publish(Header(stamp=start, frame_id="failure"))
+        await page.wait_for(PLAN, lambda p: p["state"] == "planning", "PLANNING after the failure event")
+        vehicle.trajectory_publisher.publish(trajectory)
+        vehicle.path_publisher.publish(path)
+        vehicle.plan_status_publisher.publish(plan_status)
+        plan = await page.wait_for(PLAN, lambda p: p["shown"] and p["pathPoints"] > 1, "the plan on the page")
+        expected_badge = "VERIFIED" if real_plan.verified and real_plan.safe else "UNSAFE"
+        assert plan["badge"] == expected_badge
+        assert 0.0 <= plan["timeToTouchdown"] <= real_plan.time_to_land
+        assert plan["pathPoints"] == len(real_plan.times)
+        # put the aircraft a third of the way down the plan for the picture
+        index = len(real_plan.times) // 3
+        y, v, rotor, h = real_plan.states[:4, index]
+        vehicle.rotor_speed = float(rotor)
+        vehicle.set(
+            (float(h), float(v), -float(y)), status_message(DiagnosticStatus.OK, "safe", h, v, 60.0, envelope_id)
+        )
+        await page.wait_for(MARKER, lambda m: near(m["heightFt"], h / FT, 0.5), "marker on the descent")
+        await page.wait_for(
+            "document.getElementById('failure-label').hidden", lambda hidden: hidden is False, "failure label"
+        )
+        png = await page.screenshot()
+        assert png.startswith(b"\x89PNG")
+        save_artifact(tmp_path, "display.png", png)
+
+    run_page(browser, display.url, scenario)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# The ``helireach display`` command in its own process: a frozen server, Ctrl-C with --hold, a lost link
+# ------------------------------------------------------------------------------------------------------------
+
+
+class StatusOnlyPublisher(Node):
+    """Publishes a latched SAFE safety status at 10 Hz (the status node's steady rate)."""
+
+    def __init__(self, context: Context, envelope_id: str) -> None:
+        super().__init__("display_test_status", context=context)
+        self.publisher = self.create_publisher(DiagnosticStatus, "/helireach/safety_status", LATCHED)
+        status = status_message(DiagnosticStatus.OK, "safe", 150.0, 38.0, 120.0, envelope_id)
+        self.create_timer(0.1, lambda: self.publisher.publish(status))
+
+
+@needs_chromium
+def test_display_command_link_quiet_hold_and_lost(
+    browser: Browser, envelope_file: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 200)))
+    command = [sys.executable, "-m", "helireach_ros.cli", "display", "--port", "0", "--stale-after", "2"]
+    command += ["--envelope", str(envelope_file), "--hold"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=REPO)
+    context = Context()
+    rclpy.init(context=context)
+    publisher = StatusOnlyPublisher(context, load_envelope(envelope_file).envelope_id)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(publisher)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    try:
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.extend(iter(process.stdout.readline, "")), daemon=True)
+        reader.start()
+        wait_until(lambda: any("http://" in line for line in lines), CROSS_PROCESS_TIMEOUT_S, "the display URL")
+        url = next(line for line in lines if "http://" in line).split()[-1]
+        assert url.startswith("http://127.0.0.1:")
+
+        async def scenario(page: DevToolsPage) -> None:
+            await page.banner("safe", "SAFE across processes", CROSS_PROCESS_TIMEOUT_S)
+            process.send_signal(signal.SIGSTOP)  # the server freezes with the WebSocket open
+            try:
+                await page.banner("nodata", "NO DATA when the link goes quiet", detail="DISPLAY SERVER")
+                assert await page.evaluate("window.helireach.link") == "quiet"
+            finally:
+                process.send_signal(signal.SIGCONT)
+            await page.banner("safe", "SAFE after the server resumes")
+
+            process.send_signal(signal.SIGINT)  # ROS stops; --hold keeps the page
+            await page.banner("nodata", "NO DATA while held", detail="HELD")
+            async with aiohttp.ClientSession() as http, http.get(url) as response:
+                assert response.status == 200
+            assert process.poll() is None
+
+            process.send_signal(signal.SIGINT)
+            await page.banner("nodata", "NO DATA once the display is gone", detail="LINK LOST")
+
+        run_page(browser, url, scenario)
+        assert process.wait(timeout=CROSS_PROCESS_TIMEOUT_S) == 0
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+        executor.shutdown(timeout_sec=5.0)
+        spinner.join(timeout=5.0)
+        publisher.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Envelope problems: the diagram says NO DATA, everything else works
+# ------------------------------------------------------------------------------------------------------------
+
+
+def websocket_url(display: CockpitDisplay) -> str:
+    return display.url.replace("http://", "ws://", 1) + "ws"
+
+
+async def read_frame(socket: aiohttp.ClientWebSocketResponse, timeout_s: float = TIMEOUT_S) -> dict[str, Any]:
+    message = await asyncio.wait_for(socket.receive(), timeout=timeout_s)
+    assert message.type == aiohttp.WSMsgType.TEXT, f"expected a text frame, got {message}"
+    return strict_json(message.data)
+
+
+async def frame_until(
+    socket: aiohttp.ClientWebSocketResponse, predicate: Callable[[dict[str, Any]], bool], what: str
+) -> dict[str, Any]:
+    deadline = time.monotonic() + TIMEOUT_S
+    while time.monotonic() < deadline:
+        frame = await read_frame(socket, max(deadline - time.monotonic(), 0.01))
+        if predicate(frame):
+            return frame
+    pytest.fail(f"no frame with {what} within {TIMEOUT_S} s")
+
+
+def live_level(frame: dict[str, Any]) -> str:
+    return frame["live"]["status"]["level"]
+
+
+@needs_chromium
+def test_missing_envelope_shows_no_data_diagram(browser: Browser, tmp_path: Path) -> None:
+    missing = tmp_path / "no_such_envelope.npz"
+    harness = RosHarness(envelope_file=str(missing))
+    try:
+        status = status_message(DiagnosticStatus.OK, "safe", 150.0, 38.0, 120.0, "x")
+        harness.vehicle.set((150.0, 38.0, 0.0), status)
+
+        async def scenario(page: DevToolsPage) -> None:
+            await page.banner("safe", "SAFE without an envelope")
+            await page.wait_for(
+                "document.getElementById('hv-nodata').hidden", lambda hidden: hidden is False, "diagram NO DATA"
+            )
+            reason = await page.evaluate("document.getElementById('hv-nodata-reason').textContent")
+            assert str(missing) in reason
+            await page.wait_for(MARKER, lambda m: near(m["heightFt"], 150.0 / FT), "the marker on default axes")
+            save_artifact(tmp_path, "display-no-envelope.png", await page.screenshot())
+
+        run_page(browser, harness.display.url, scenario)
+    finally:
+        harness.close()
+
+
+def test_corrupt_envelope_gives_no_data_diagram(tmp_path: Path, envelope_file: Path) -> None:
+    corrupt = tmp_path / "corrupt.npz"
+    corrupt.write_bytes(envelope_file.read_bytes()[: envelope_file.stat().st_size // 2])  # truncated
+    harness = RosHarness(envelope_file=str(corrupt))
+    try:
+        harness.vehicle.set((150.0, 38.0, 0.0), status_message(DiagnosticStatus.ERROR, "unsafe", 150, 38, -3, "x"))
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as socket:
+                first = await read_frame(socket)
+                assert first["envelope"]["available"] is False
+                assert str(corrupt) in first["envelope"]["reason"]
+                assert first["config"]["rotor_limits"] is None  # no envelope, no airframe given
+                await frame_until(socket, lambda f: live_level(f) == "avoid", "AVOID without an envelope")
+
+        asyncio.run(scenario())
+    finally:
+        harness.close()
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Server behaviour: latest value only, read-only, files, many pages, bad input, binding, shutdown
+# ------------------------------------------------------------------------------------------------------------
+
+
+def test_frames_carry_the_latest_state_and_are_rate_limited(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file), max_update_rate_hz=5.0)
+    state_count = 500
+    try:
+
+        async def scenario() -> int:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as socket:
+                await read_frame(socket)
+                message = Odometry()
+                for index in range(state_count):  # ~1 kHz for ~0.5 s, while this page reads nothing
+                    message.pose.pose.position.z = float(index)
+                    harness.vehicle.state_publisher.publish(message)
+                    await asyncio.sleep(0.001)
+                last = float(state_count - 1)
+                frames = 0
+                while True:
+                    frame = await read_frame(socket)
+                    frames += 1
+                    state = frame["live"]["state"]
+                    if state and state["height_m"] == last:
+                        return frames
+
+        frames = asyncio.run(scenario())
+        # one frame per state would be 500; at 5 frames/s (+ heartbeats) a page gets a handful
+        assert frames < state_count // 10, f"{frames} frames for {state_count} states: frames are not dropped"
+    finally:
+        harness.close()
+
+
+def test_display_is_read_only(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    try:
+        harness.vehicle.set((150.0, 38.0, 0.0), status_message(DiagnosticStatus.WARN, "near", 150, 38, 8, "x"))
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as socket:
+                await frame_until(socket, lambda f: live_level(f) == "caution", "CAUTION")
+                for text in ('{"command": "set_status", "level": 0}', "engine_failure", "x" * 1000):
+                    await socket.send_str(text)
+                await socket.send_bytes(b"\x00\x01\x02")
+                # the browser's words change nothing; frames keep coming on the same connection
+                for _ in range(5):
+                    frame = await read_frame(socket)
+                    assert live_level(frame) == "caution"
+                assert not socket.closed
+
+        asyncio.run(scenario())
+        topics = {name for name, _ in harness.display.get_publisher_names_and_types_by_node("helireach_display", "/")}
+        assert topics <= {"/rosout", "/parameter_events"}, f"the display publishes {topics}"
+    finally:
+        harness.close()
+
+
+def test_serves_only_the_page_files(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    try:
+
+        async def scenario() -> None:
+            base = harness.display.url
+            async with aiohttp.ClientSession() as http:
+                for path, content_type in (("", "text/html"), ("app.js", "text/javascript"), ("style.css", "text/css")):
+                    async with http.get(base + path) as response:
+                        assert response.status == 200, path
+                        assert response.content_type == content_type
+                        assert "default-src 'none'" in response.headers["Content-Security-Policy"]
+                        assert (await response.read()) == (web_directory() / (path or "index.html")).read_bytes()
+                for path in ("../setup.py", "%2e%2e/setup.py", "web/app.js", "config/planner.yaml", "display.py"):
+                    async with http.get(base + path) as response:
+                        assert response.status == 404, path
+                async with http.ws_connect(websocket_url(harness.display), origin="http://evil.example") as socket:
+                    pytest.fail(f"cross-origin WebSocket accepted: {socket}")
+
+        with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+            asyncio.run(scenario())
+        assert refused.value.status == 403
+    finally:
+        harness.close()
+
+
+def test_page_files_load_nothing_from_elsewhere() -> None:
+    for name in ("index.html", "app.js", "style.css"):
+        text = (web_directory() / name).read_text()
+        for forbidden in ("http://", "https://", "@import", "@font-face", "url(", 'src="//'):
+            assert forbidden not in text, f"{name} contains {forbidden!r}"
+    html = (web_directory() / "index.html").read_text()
+    assert 'src="app.js"' in html and 'href="style.css"' in html
+
+
+def test_many_pages_and_reconnects(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    try:
+        harness.vehicle.set((150.0, 38.0, 0.0), status_message(DiagnosticStatus.OK, "safe", 150, 38, 50, "x"))
+
+        async def scenario() -> None:
+            sessions = [aiohttp.ClientSession() for _ in range(8)]
+            sockets = [await session.ws_connect(websocket_url(harness.display)) for session in sessions]
+            for socket in sockets:
+                first = await read_frame(socket)
+                assert {"config", "envelope", "plan", "live"} <= first.keys()
+            wait_until(lambda: harness.display.page_count == 8, TIMEOUT_S, "8 pages")
+            for session in sessions[:4]:  # vanish without a close handshake, like a killed browser
+                await session.connector.close()
+            for socket in sockets[4:]:
+                await frame_until(socket, lambda f: live_level(f) == "safe", "SAFE on a surviving page")
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as again:
+                await frame_until(again, lambda f: live_level(f) == "safe", "SAFE after a reconnect")
+            for socket, session in zip(sockets[4:], sessions[4:], strict=True):
+                await socket.close()
+                await session.close()
+            for session in sessions[:4]:
+                await session.close()
+
+        asyncio.run(scenario())
+        wait_until(lambda: harness.display.page_count == 0, TIMEOUT_S, "every page to be gone")
+    finally:
+        harness.close()
+
+
+def test_bad_messages_never_break_the_page(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    vehicle = harness.vehicle
+    try:
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as socket:
+                vehicle.set((math.nan, math.inf, -math.inf), status_message(DiagnosticStatus.OK, "ok", 1, 1, 1, "x"))
+                frame = await frame_until(socket, lambda f: f["live"]["state"] is not None, "a NaN state")
+                assert frame["live"]["state"]["height_m"] is None and frame["live"]["state"]["speed_ms"] is None
+
+                odd = DiagnosticStatus(level=b"\x07", message="level from the future", values=[])
+                vehicle.set(None, odd)
+                frame = await frame_until(socket, lambda f: f["live"]["status"]["message"] == odd.message, "odd")
+                assert live_level(frame) == "nodata" and frame["live"]["status"]["margin"] is None
+
+                other = status_message(DiagnosticStatus.OK, "ok", 1, 1, math.nan, "not-this-envelope")
+                vehicle.set(None, other)
+                frame = await frame_until(socket, lambda f: f["live"]["status"]["envelope_mismatch"], "mismatch")
+                assert live_level(frame) == "safe" and frame["live"]["status"]["margin"] is None
+
+                vehicle.rotor_publisher.publish(JointState(name=["tail_rotor"], velocity=[100.0]))
+                frame = await frame_until(socket, lambda f: f["live"]["rotor"] is not None, "a rotor message")
+                assert frame["live"]["rotor"]["speed_rad_s"] is None
+
+                for publisher in (vehicle.trajectory_publisher, vehicle.path_publisher):
+                    wait_until(lambda p=publisher: p.get_subscription_count() > 0, TIMEOUT_S, "display")
+                broken = JointTrajectory(joint_names=["pitch_angle"], points=[JointTrajectoryPoint(positions=[0.1])])
+                vehicle.trajectory_publisher.publish(broken)
+                vehicle.path_publisher.publish(PathMsg())
+                frame = await frame_until(
+                    socket, lambda f: bool(f.get("plan") and f["plan"]["trajectory"] and f["plan"]["path"]), "plan"
+                )
+                assert "collective_thrust_coefficient" in frame["plan"]["trajectory"]["error"]
+                assert "no poses" in frame["plan"]["path"]["error"]
+
+                vehicle.set((100.0, 30.0, 0.0), status_message(DiagnosticStatus.ERROR, "unsafe", 100, 30, -4, "x"))
+                await frame_until(socket, lambda f: live_level(f) == "avoid", "the node still working")
+
+        asyncio.run(scenario())
+    finally:
+        harness.close()
+
+
+def test_loopback_by_default_and_a_clear_error_for_a_busy_port(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    try:
+        assert harness.display.get_parameter("bind").value == "127.0.0.1"
+        assert harness.display.url.startswith("http://127.0.0.1:")
+        busy_port = int(harness.display.url.rsplit(":", 1)[1].strip("/"))
+        with pytest.raises(DisplayServerError, match=f"127.0.0.1:{busy_port}"):
+            CockpitDisplay(context=harness.context, parameter_overrides=[Parameter("port", value=busy_port)])
+        with socket.create_connection(("127.0.0.1", busy_port), timeout=5):  # the first one still serves
+            pass
+    finally:
+        harness.close()
+
+
+def test_destroy_node_closes_pages_and_the_port(envelope_file: Path) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    url = harness.display.url
+    try:
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as page:
+                await read_frame(page)
+                harness.destroy_display()
+                while True:
+                    message = await asyncio.wait_for(page.receive(), timeout=TIMEOUT_S)
+                    if message.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED):
+                        break
+                assert page.close_code == aiohttp.WSCloseCode.GOING_AWAY
+                with pytest.raises(aiohttp.ClientConnectorError):
+                    async with http.get(url):
+                        pass
+
+        asyncio.run(scenario())
+    finally:
+        harness.close()
+
+
+# ------------------------------------------------------------------------------------------------------------
+# Pure helpers
+# ------------------------------------------------------------------------------------------------------------
+
+
+def test_banner_levels() -> None:
+    assert banner_level(DiagnosticStatus.OK) == "safe"
+    assert banner_level(DiagnosticStatus.WARN) == "caution"
+    assert banner_level(DiagnosticStatus.ERROR) == "avoid"
+    assert banner_level(DiagnosticStatus.STALE) == "nodata"
+    assert banner_level(b"\x09") == "nodata"  # unknown is never optimistic
+    assert banner_level(1) == "caution"
+
+
+def test_rotor_limits_from_airframe_and_envelope_metadata() -> None:
+    airframe = load_airframe("uh60a_class")
+    expected = (
+        airframe.nominal_rotor_speed,
+        airframe.limits.min_rotor_speed_ratio * airframe.nominal_rotor_speed,
+        airframe.limits.max_rotor_speed_ratio * airframe.nominal_rotor_speed,
+    )
+    for limits in (
+        rotor_limits_section(airframe=airframe),
+        rotor_limits_section(metadata={"airframe": airframe.as_dict()}),
+    ):
+        assert limits is not None
+        assert (limits["nominal_rad_s"], limits["min_rad_s"], limits["max_rad_s"]) == pytest.approx(expected)
+    assert rotor_limits_section(metadata={"airframe": {"name": "x"}}) is None
+    assert rotor_limits_section(metadata={}) is None
+
+
+def test_path_speed_needs_increasing_stamps() -> None:
+    path = PathMsg()
+    for index in range(5):
+        pose = PoseStamped()
+        pose.header.stamp = TimeMsg(sec=100 + index, nanosec=0)
+        pose.pose.position.x = 3.0 * index**2  # x = 3 t², v = 6 t
+        pose.pose.position.z = 50.0 - index
+        path.poses.append(pose)
+    section = path_section(path)
+    assert section["speed_ms"][1:4] == pytest.approx([6.0, 12.0, 18.0])  # central differences are exact here
+    assert section["z_m"] == [50.0, 49.0, 48.0, 47.0, 46.0]
+    for pose in path.poses:
+        pose.header.stamp = TimeMsg()
+    assert path_section(path)["speed_ms"] is None
+
+
+def test_boundary_points_join_into_cell_segments() -> None:
+    heights = np.array([0.0, 10.0, 20.0])
+    speeds = np.array([0.0, 5.0, 10.0])
+    # a boundary crossing the lower-left cell from its left edge (h = 4 on v = 0) to its top edge (v = 3 on h = 10),
+    # then the upper-left cell's bottom edge (shared) to its right edge (h = 16 on v = 5)
+    points = np.array([[4.0, 0.0], [10.0, 3.0], [16.0, 5.0]])
+    segments = boundary_segments(heights, speeds, points)
+    assert sorted(segments) == sorted([(4.0, 0.0, 10.0, 3.0), (10.0, 3.0, 16.0, 5.0)])
