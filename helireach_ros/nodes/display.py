@@ -29,6 +29,7 @@ from __future__ import annotations
 import asyncio
 import json
 import math
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -394,7 +395,7 @@ class _Received:
 
 @dataclass
 class _Latest:
-    """The newest value of everything the page shows; guarded by ``_DisplayNodeData.lock``."""
+    """The newest value of everything the page shows (guarded by the node's lock)."""
 
     status: _Received | None = None
     last_known_banner: str | None = None
@@ -441,8 +442,6 @@ class _PageServer:
         self._wake_pending = False
         self._runner: web.AppRunner | None = None
         self.address: tuple[str, int] | None = None
-        self.frames_sent = 0
-        self.pages_served = 0
         started = threading.Event()
         failure: list[BaseException] = []
         self._thread = threading.Thread(
@@ -494,7 +493,6 @@ class _PageServer:
         except OSError as error:
             self._log_warning(f"display page file {name} unreadable: {error}")
             raise web.HTTPInternalServerError(text=f"display page file {name} is missing from the package") from None
-        self.pages_served += 1
         return web.Response(body=body, content_type=content_type, charset="utf-8", headers=_SECURITY_HEADERS)
 
     async def _serve_websocket(self, request: web.Request) -> web.StreamResponse:
@@ -528,7 +526,6 @@ class _PageServer:
             while not socket.closed:
                 text, sent_versions = self._frame(sent_versions)
                 await asyncio.wait_for(socket.send_str(text), timeout=_SEND_TIMEOUT_S)
-                self.frames_sent += 1
                 # rate limit: whatever arrives meanwhile only re-sets the event; the next frame is the latest value
                 await asyncio.sleep(self.min_interval_s)
                 try:
@@ -536,9 +533,12 @@ class _PageServer:
                 except TimeoutError:
                     pass
                 wakeup.clear()
-        except (ConnectionError, TimeoutError, RuntimeError) as error:
+        except (ConnectionError, TimeoutError, RuntimeError) as error:  # gone, or too slow to take a frame
             self._log_warning(f"display page dropped: {error!r}")
-            await socket.close(code=WSCloseCode.TRY_AGAIN_LATER, message=b"too slow")
+            await socket.close(code=WSCloseCode.TRY_AGAIN_LATER, message=b"dropped")
+        except Exception as error:  # a frame that cannot be built: the page sees silence and shows NO DATA
+            self._log_warning(f"display frame failed: {type(error).__name__}: {error}")
+            await socket.close(code=WSCloseCode.INTERNAL_ERROR, message=b"frame error")
 
     def _wake_all(self) -> None:
         self._wake_pending = False
@@ -601,7 +601,7 @@ class CockpitDisplay(Node):
         self._stale_after_s = self._declare(
             "stale_after_s", 2.0, "NO DATA after this long without a message", floating=(0.1, 3600.0), read_only=False
         )
-        max_rate = self._declare(
+        self._max_update_rate_hz = self._declare(
             "max_update_rate_hz", 25.0, "most frames per second sent to one page", floating=(1.0, 120.0)
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
@@ -623,13 +623,16 @@ class CockpitDisplay(Node):
         # BEST_EFFORT matches reliable and best-effort publishers; depth 1: only the newest sample matters
         sensor = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
         plan = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE)
-        self.create_subscription(DiagnosticStatus, SAFETY_STATUS_TOPIC, self._on_safety_status, latched)
-        self.create_subscription(Odometry, state_topic, self._on_state, sensor)
-        self.create_subscription(JointState, ROTOR_TOPIC, self._on_rotor, sensor)
-        self.create_subscription(Header, FAILURE_EVENT_TOPIC, self._on_failure, plan)
-        self.create_subscription(JointTrajectory, TRAJECTORY_TOPIC, self._on_trajectory, plan)
-        self.create_subscription(PathMsg, PATH_TOPIC, self._on_path, plan)
-        self.create_subscription(DiagnosticStatus, PLAN_STATUS_TOPIC, self._on_plan_status, plan)
+        for message_type, topic, callback, qos in (
+            (DiagnosticStatus, SAFETY_STATUS_TOPIC, self._on_safety_status, latched),
+            (Odometry, state_topic, self._on_state, sensor),
+            (JointState, ROTOR_TOPIC, self._on_rotor, sensor),
+            (Header, FAILURE_EVENT_TOPIC, self._on_failure, plan),
+            (JointTrajectory, TRAJECTORY_TOPIC, self._on_trajectory, plan),
+            (PathMsg, PATH_TOPIC, self._on_path, plan),
+            (DiagnosticStatus, PLAN_STATUS_TOPIC, self._on_plan_status, plan),
+        ):
+            self.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
 
         if self._bind not in ("127.0.0.1", "::1", "localhost"):
             self.get_logger().warning(f"display listens on {self._bind}, not loopback: reachable from the network")
@@ -638,8 +641,7 @@ class CockpitDisplay(Node):
                 self._bind,
                 self._port,
                 self._frame,
-                min_interval_s=1.0 / max_rate,
-                heartbeat_s=self._heartbeat_s(),
+                *self._frame_timing(),
                 log_warning=self.get_logger().warning,
             )
         except DisplayServerError:
@@ -678,13 +680,18 @@ class CockpitDisplay(Node):
                     self._config_json = _to_json(self._config)
                     self._latest.versions["config"] += 1
                 if hasattr(self, "_server"):
-                    self._server.heartbeat_s = self._heartbeat_s()
+                    self._server.min_interval_s, self._server.heartbeat_s = self._frame_timing()
                     self._server.notify()
         return SetParametersResult(successful=True)
 
-    def _heartbeat_s(self) -> float:
-        # the page calls the link quiet after stale_after_s: send well within that
-        return min(0.5, self._stale_after_s / 3.0)
+    def _frame_timing(self) -> tuple[float, float]:
+        """The (shortest, longest) time between two frames to one page, s.
+
+        The shortest is the rate limit; the longest, a heartbeat well within ``stale_after_s``, lets the page
+        tell a quiet sky from a dead link (the rate limit never stretches past it).
+        """
+        heartbeat = min(0.5, self._stale_after_s / 3.0)
+        return min(1.0 / self._max_update_rate_hz, heartbeat), heartbeat
 
     # -- envelope and airframe ---------------------------------------------------------------------------
     def _load_envelope(self) -> tuple[Any, dict[str, Any]]:
@@ -729,16 +736,23 @@ class CockpitDisplay(Node):
         }
 
     # -- ROS callbacks (any executor thread) -------------------------------------------------------------
-    def _store(self, update: Callable[[_Latest, float], None], what: str) -> None:
-        """Applies an update under the lock and wakes the pages; a bad message is logged, never raised."""
-        try:
-            with self._lock:
-                update(self._latest, time.monotonic())
-        except Exception as error:
-            self.get_logger().warning(
-                f"ignored a bad {what} message: {type(error).__name__}: {error}", throttle_duration_sec=5.0
-            )
-            return
+    def _never_raising(self, callback: Callable[[Any], None], topic: str) -> Callable[[Any], None]:
+        """Wraps a subscription callback: a message it cannot digest is logged and dropped, never raised."""
+
+        def guarded(message: Any) -> None:
+            try:
+                callback(message)
+            except Exception as error:
+                self.get_logger().warning(
+                    f"ignored a bad message on {topic}: {type(error).__name__}: {error}", throttle_duration_sec=5.0
+                )
+
+        return guarded
+
+    def _store(self, update: Callable[[_Latest, float], None]) -> None:
+        """Applies an update to the latest values under the lock (receipt time = now) and wakes the pages."""
+        with self._lock:
+            update(self._latest, time.monotonic())
         self._server_notify()
 
     def _server_notify(self) -> None:
@@ -760,7 +774,7 @@ class CockpitDisplay(Node):
             if content["level"] != "nodata":
                 latest.last_known_banner = content["level"]
 
-        self._store(update, "safety status")
+        self._store(update)
 
     def _on_state(self, message: Odometry) -> None:
         content = {
@@ -772,7 +786,7 @@ class CockpitDisplay(Node):
         def update(latest: _Latest, now: float) -> None:
             latest.state = _Received(content, now)
 
-        self._store(update, "state")
+        self._store(update)
 
     def _on_rotor(self, message: JointState) -> None:
         names = list(message.name)
@@ -783,7 +797,7 @@ class CockpitDisplay(Node):
         def update(latest: _Latest, now: float) -> None:
             latest.rotor = _Received({"speed_rad_s": speed}, now)
 
-        self._store(update, "rotor")
+        self._store(update)
 
     def _on_failure(self, message: Header) -> None:
         failure_stamp = _seconds(message.stamp)
@@ -797,7 +811,7 @@ class CockpitDisplay(Node):
                 latest.plan_reference = None
             self._rebuild_plan(latest)
 
-        self._store(update, "failure event")
+        self._store(update)
 
     def _on_trajectory(self, message: JointTrajectory) -> None:
         section = trajectory_section(message)
@@ -811,7 +825,7 @@ class CockpitDisplay(Node):
             latest.plan_reference = now - lag if stamp > 0 and 0.0 <= lag <= _PLAN_STAMP_TOLERANCE_S else now
             self._rebuild_plan(latest)
 
-        self._store(update, "trajectory")
+        self._store(update)
 
     def _on_path(self, message: PathMsg) -> None:
         section = path_section(message)
@@ -820,7 +834,7 @@ class CockpitDisplay(Node):
             latest.path = _Received(section, now)
             self._rebuild_plan(latest)
 
-        self._store(update, "path")
+        self._store(update)
 
     def _on_plan_status(self, message: DiagnosticStatus) -> None:
         section = plan_status_section(message)
@@ -829,7 +843,7 @@ class CockpitDisplay(Node):
             latest.plan_status = _Received(section, now)
             self._rebuild_plan(latest)
 
-        self._store(update, "plan status")
+        self._store(update)
 
     def _rebuild_plan(self, latest: _Latest) -> None:
         """Re-serialises the plan section (called under the lock on every plan-related message)."""
@@ -984,7 +998,7 @@ def run_display(
         print(f"helireach display: {display.url}", flush=True)
         rclpy.spin(display)
     except DisplayServerError as error:
-        print(f"helireach display: {error}", flush=True)
+        print(f"helireach display: {error}", file=sys.stderr, flush=True)
         return 1
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
