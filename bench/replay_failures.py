@@ -25,8 +25,8 @@ VARIANTS = {
     "paper N=24 c=3 (paper)": PlannerSettings(method="paper", paper_points=24, paper_time_scale=3.0),
     "paper N=24 c=6": PlannerSettings(method="paper", paper_points=24, paper_time_scale=6.0),
     "paper N=60 c=6": PlannerSettings(method="paper", paper_points=60, paper_time_scale=6.0),
-    "verified K=20 d=3": PlannerSettings(intervals=20),
-    "verified K=40 d=3 (default)": PlannerSettings(),
+    "verified K=20 d=3 (default)": PlannerSettings(),
+    "verified K=40 d=3": PlannerSettings(intervals=40),
     "verified K=80 d=3 (reference)": PlannerSettings(intervals=80),
 }
 REFERENCE = "verified K=80 d=3 (reference)"

@@ -43,7 +43,7 @@ class PlannerSettings:
     """
 
     method: str = "verified"
-    intervals: int = 40
+    intervals: int = 20
     degree: int = 3
     final_interval_ratio: float = 0.35
     min_time_to_land: float = 0.2
