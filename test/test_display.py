@@ -554,6 +554,15 @@ def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, r
         assert png.startswith(b"\x89PNG")
         save_artifact(tmp_path, "display.png", png)
 
+        # a re-plan that missed its deadline: the planner falls back and says so
+        fallback = DiagnosticStatus(
+            level=DiagnosticStatus.WARN,
+            message="deadline missed: nearest envelope plan",
+            values=[KeyValue(key="fallback", value="true"), KeyValue(key="verified", value="false")],
+        )
+        vehicle.plan_status_publisher.publish(fallback)
+        await page.wait_for(PLAN, lambda p: p.get("badge") == "FALLBACK", "the FALLBACK badge")
+
     run_page(browser, display.url, scenario)
 
 
