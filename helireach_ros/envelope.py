@@ -1,0 +1,603 @@
+"""H-V envelopes: the data model, the file format, loading with checks, and queries (ROS-free, numpy only).
+
+An envelope holds, for one airframe, planner settings and power-loss level, the landing analysis of
+every node of a (height above ground, forward speed) grid of level-trim states: status, optimal
+value, time to land, solver statistics and the plan itself (compactly, to warm-start or publish a
+fallback), plus the refined safe/unsafe boundary points. It is computed by
+:mod:`helireach_ros.envelope_compute`.
+
+File format (``.npz``, one file per envelope, self-describing):
+
+* a NumPy ``.npz`` archive (zip, deflate) of plain numeric arrays — loaded with
+  ``allow_pickle=False``, so a file cannot execute code;
+* ``metadata_json``: UTF-8 JSON (uint8 array) with the format name and version, grid units, the
+  airframe's full parameters and digest, the planner settings, method, power fraction, software
+  versions, the command that produced it, timings and counts, and the status-code legend;
+* ``checksum``: SHA-256 over the metadata and every array (name, dtype, shape, bytes). A truncated or
+  corrupt file fails the zip CRC or this checksum and is refused with :class:`EnvelopeError`.
+
+Per-cell plans are stored as float32: the NLP primal and both multiplier vectors (a
+:class:`~helireach_ros.planner.WarmStart`) and the control function (breakpoints and values), which
+is enough to warm-start the planner and to publish a fallback trajectory.
+
+Query semantics are conservative. A state is ``safe`` only if every grid node enclosing it is safe
+(on a node: that node; on a grid line: its two end nodes; inside a cell: its four corners); outside
+the grid it is ``outside``. The margin is the signed distance, in the (ft, kt) plane where 1 ft and
+1 kt count as one unit, to the boundary of the set that is not proven safe under that same rule:
+positive for safe states, negative otherwise, so margin > 0 exactly when the status is ``safe``. The
+refined boundary points are reported and plotted, but never used to call a state safe.
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import io
+import json
+import math
+import os
+import zipfile
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from helireach_ros.resources import config_path
+from helireach_ros.units import FT, KT
+
+if TYPE_CHECKING:
+    from helireach_ros.airframe import Airframe
+    from helireach_ros.planner import WarmStart
+    from helireach_ros.settings import PlannerSettings
+
+__all__ = [
+    "DEFAULT_ENVELOPE",
+    "FORMAT_NAME",
+    "FORMAT_VERSION",
+    "PENDING",
+    "QUERY_STATUSES",
+    "STATUS_CODES",
+    "Envelope",
+    "EnvelopeError",
+    "EnvelopeQuery",
+    "StoredPlan",
+    "default_envelope_path",
+    "load_envelope",
+    "read_envelope_file",
+    "save_envelope",
+    "settings_differences",
+]
+
+FORMAT_NAME = "helireach-envelope"
+FORMAT_VERSION = 1
+DEFAULT_ENVELOPE = "envelopes/uh60a_class_total_power_loss.npz"
+"""The shipped envelope, relative to ``config/``."""
+
+STATUS_CODES = {"safe": 0, "unsafe": 1, "unverified": 2, "failed": 3}
+"""Per-cell status as stored in the file (int8)."""
+PENDING = -1
+"""Status code of a cell a partial (interrupted) computation has not finished."""
+_STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
+QUERY_STATUSES = (*STATUS_CODES, "outside")
+
+# Between enclosing nodes of different status, the query reports the most conservative one.
+_CONSERVATISM = {"safe": 0, "unverified": 1, "failed": 2, "unsafe": 3}
+
+# Arrays every envelope file holds: name -> (dtype kind, number of leading grid dimensions).
+_REQUIRED_ARRAYS = {
+    "heights": "f",
+    "speeds": "f",
+    "status_code": "i",
+    "value": "f",
+    "time_to_land": "f",
+    "replay_value": "f",
+    "verified": "b",
+    "iterations": "i",
+    "solve_time_ms": "f",
+    "warm_started": "b",
+    "cold_checked": "b",
+    "warm_cold_disagree": "b",
+    "plan_primal": "f",
+    "plan_bound_multipliers": "f",
+    "plan_constraint_multipliers": "f",
+    "plan_control_times": "f",
+    "plan_control_values": "f",
+    "boundary": "f",
+    "boundary_unsafe_side": "f",
+    "boundary_edge": "i",
+}
+_CELL_ARRAYS = tuple(name for name in _REQUIRED_ARRAYS if name not in {"heights", "speeds"} and "boundary" not in name)
+
+
+class EnvelopeError(ValueError):
+    """An envelope file that is missing, corrupt, truncated, partial, or made for something else."""
+
+
+@dataclass(frozen=True)
+class EnvelopeQuery:
+    """The envelope's answer for one (height, speed).
+
+    Attributes:
+        status: ``"safe"``, ``"unsafe"``, ``"unverified"``, ``"failed"`` or ``"outside"``.
+        value: the largest optimal value among the enclosing nodes (> 0: unsafe); NaN outside
+            the grid or when an enclosing node failed.
+        margin: signed distance to the not-proven-safe set in the (ft, kt) plane: > 0 when safe,
+            < 0 otherwise; ±inf if there is no such boundary; NaN outside the grid.
+    """
+
+    status: str
+    value: float
+    margin: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (non-finite numbers become None)."""
+        return {"status": self.status, "value": _json_number(self.value), "margin": _json_number(self.margin)}
+
+
+@dataclass(frozen=True)
+class StoredPlan:
+    """The plan stored for one grid node.
+
+    Attributes:
+        height: m; ``speed``: m/s (the node's level-trim state at the failure).
+        status: the node's status.
+        value: its optimal value.
+        time_to_land: s.
+        warm_start: the NLP solution, for the planner of the envelope's airframe and settings.
+        control_times, control_values, control_interpolation: the control function
+            (see :class:`~helireach_ros.transcription.DecodedPlan`).
+    """
+
+    height: float
+    speed: float
+    status: str
+    value: float
+    time_to_land: float
+    warm_start: WarmStart
+    control_times: np.ndarray
+    control_values: np.ndarray
+    control_interpolation: str
+
+    def controls_at(self, times) -> np.ndarray:
+        """The planned (C_T, θ) at the given times, 2 × len(times) (held constant outside the plan)."""
+        from helireach_ros.transcription import DecodedPlan
+        from helireach_ros.verification import control_function
+
+        empty = np.zeros((6, 0))
+        plan = DecodedPlan(self.time_to_land, empty[0], empty, self.control_times, self.control_values,
+                           self.control_interpolation)  # fmt: skip
+        return control_function(plan, times)
+
+
+def _json_number(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def _readonly(array: np.ndarray) -> np.ndarray:
+    array = np.array(array, copy=True)
+    array.setflags(write=False)
+    return array
+
+
+def _content_checksum(arrays: dict[str, np.ndarray], metadata_json: bytes) -> str:
+    digest = hashlib.sha256()
+    digest.update(b"metadata\0" + metadata_json)
+    for name in sorted(arrays):
+        array = np.ascontiguousarray(arrays[name])
+        digest.update(f"\0{name}\0{array.dtype.str}\0{array.shape}\0".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
+
+
+def _canonical_json(metadata: dict[str, Any]) -> bytes:
+    return json.dumps(metadata, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
+
+
+class Envelope:
+    """An immutable H-V envelope (see the module docstring for the semantics).
+
+    Construct it with :func:`load_envelope` or :mod:`helireach_ros.envelope_compute`; the
+    constructor validates shapes and codes but not the checksum (that is the file's business).
+
+    Attributes:
+        heights: grid heights above ground, m, ascending (axis 0).
+        speeds: grid forward speeds, m/s, ascending (axis 1).
+        status: H × S array of ``"safe"``/``"unsafe"``/``"unverified"``/``"failed"``
+            (``"pending"`` only in a partial envelope).
+        value: H × S optimal values (NaN where the solver failed).
+        time_to_land: H × S, s.
+        boundary: B × 2 refined boundary points (height m, speed m/s): on each grid line between a
+            safe and an unsafe/unverified node, the last point proven safe, within 2 ft / 1 kt
+            (by default) of the first point found not safe.
+        metadata: a copy of the file's metadata dict.
+        envelope_id: a short hash of the content and metadata.
+        airframe_name: the airframe's name.
+    """
+
+    def __init__(self, arrays: dict[str, np.ndarray], metadata: dict[str, Any]) -> None:
+        missing = sorted(set(_REQUIRED_ARRAYS) - set(arrays))
+        if missing:
+            raise EnvelopeError(f"envelope is missing array(s): {', '.join(missing)}")
+        self._arrays = {name: _readonly(np.asarray(array)) for name, array in arrays.items()}
+        self._metadata_json = _canonical_json(metadata)
+        self._metadata = json.loads(self._metadata_json)
+        self._validate()
+        self._checksum = _content_checksum(self._arrays, self._metadata_json)
+        self._status = _readonly(
+            np.vectorize(lambda code: _STATUS_NAMES.get(int(code), "pending"), otypes=[object])(
+                self._arrays["status_code"]
+            ).astype("U10")
+        )
+        self._margin_geometry = _MarginGeometry(self.heights / FT, self.speeds / KT, self._arrays["status_code"] == 0)
+
+    def _validate(self) -> None:
+        arrays = self._arrays
+        for name, kind in _REQUIRED_ARRAYS.items():
+            if arrays[name].dtype.kind != kind and not (kind == "i" and arrays[name].dtype.kind == "u"):
+                raise EnvelopeError(f"array {name!r} has dtype {arrays[name].dtype}, expected kind {kind!r}")
+        heights, speeds = arrays["heights"], arrays["speeds"]
+        for name, axis in (("heights", heights), ("speeds", speeds)):
+            if axis.ndim != 1 or axis.size < 2 or not np.all(np.isfinite(axis)) or np.any(np.diff(axis) <= 0):
+                raise EnvelopeError(f"grid axis {name!r} must hold >= 2 finite, strictly ascending values")
+        grid = (heights.size, speeds.size)
+        for name in _CELL_ARRAYS:
+            if arrays[name].shape[:2] != grid:
+                raise EnvelopeError(f"array {name!r} has shape {arrays[name].shape}, expected {grid} leading")
+        codes = arrays["status_code"]
+        if not np.all(np.isin(codes, [PENDING, *STATUS_CODES.values()])):
+            raise EnvelopeError("status_code holds unknown codes")
+        boundary_count = arrays["boundary"].shape[0]
+        for name, width in (("boundary", 2), ("boundary_unsafe_side", 2), ("boundary_edge", 4)):
+            if arrays[name].shape != (boundary_count, width):
+                expected = (boundary_count, width)
+                raise EnvelopeError(f"array {name!r} has shape {arrays[name].shape}, expected {expected}")
+        if self._metadata.get("format") != FORMAT_NAME:
+            raise EnvelopeError(f"metadata format is {self._metadata.get('format')!r}, expected {FORMAT_NAME!r}")
+
+    # --- the contract's attributes -------------------------------------------------------------
+    @property
+    def heights(self) -> np.ndarray:
+        return self._arrays["heights"]
+
+    @property
+    def speeds(self) -> np.ndarray:
+        return self._arrays["speeds"]
+
+    @property
+    def status(self) -> np.ndarray:
+        return self._status
+
+    @property
+    def value(self) -> np.ndarray:
+        return self._arrays["value"]
+
+    @property
+    def time_to_land(self) -> np.ndarray:
+        return self._arrays["time_to_land"]
+
+    @property
+    def boundary(self) -> np.ndarray:
+        return self._arrays["boundary"]
+
+    @property
+    def metadata(self) -> dict[str, Any]:
+        return copy.deepcopy(self._metadata)
+
+    @property
+    def envelope_id(self) -> str:
+        return self._checksum[:16]
+
+    @property
+    def checksum(self) -> str:
+        """The full SHA-256 content checksum (as stored in the file)."""
+        return self._checksum
+
+    @property
+    def airframe_name(self) -> str:
+        return str(self._metadata.get("airframe", {}).get("name", "unknown"))
+
+    # --- further read-only views ---------------------------------------------------------------
+    @property
+    def power_fraction(self) -> float:
+        """Engine power left after the failure, as a fraction of trim power (0 = total loss)."""
+        return float(self._metadata["power_fraction"])
+
+    @property
+    def complete(self) -> bool:
+        """False for a partial file left by an interrupted computation."""
+        return bool(self._metadata.get("complete", False)) and not np.any(self._arrays["status_code"] == PENDING)
+
+    @property
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Every stored array (read-only views), e.g. ``verified``, ``iterations``, ``cold_checked``."""
+        return dict(self._arrays)
+
+    # --- queries -------------------------------------------------------------------------------
+    def query(self, height_m: float, speed_ms: float) -> EnvelopeQuery:
+        """Status, value and margin at a level-trim state (see the module docstring).
+
+        Args:
+            height_m: height above ground, m.
+            speed_ms: forward speed, m/s.
+        """
+        rows = _enclosing_nodes(self.heights, height_m)
+        columns = _enclosing_nodes(self.speeds, speed_ms)
+        if rows is None or columns is None:
+            return EnvelopeQuery("outside", math.nan, math.nan)
+        codes = self._arrays["status_code"][np.ix_(rows, columns)].ravel()
+        names = [_STATUS_NAMES.get(int(code), "failed") for code in codes]  # a pending node counts as failed
+        status = max(names, key=_CONSERVATISM.__getitem__)
+        value = float(np.max(self.value[np.ix_(rows, columns)]))
+        margin = self._margin_geometry.margin(height_m / FT, speed_ms / KT, status == "safe")
+        return EnvelopeQuery(status, value, margin)
+
+    def status_at(self, height_m: float, speed_ms: float) -> str:
+        """Shortcut for ``query(height_m, speed_ms).status``."""
+        return self.query(height_m, speed_ms).status
+
+    def margin(self, height_m: float, speed_ms: float) -> float:
+        """Shortcut for ``query(height_m, speed_ms).margin`` (ft/kt units)."""
+        return self.query(height_m, speed_ms).margin
+
+    def nearest_plan(self, height_m: float, speed_ms: float) -> StoredPlan | None:
+        """The stored plan of the nearest node (in the ft/kt plane) whose solve converged.
+
+        Returns None for a non-finite query or when no node has a usable plan.
+        """
+        if not (math.isfinite(height_m) and math.isfinite(speed_ms)):
+            return None
+        codes = self._arrays["status_code"]
+        primal = self._arrays["plan_primal"]
+        usable = (codes >= 0) & (codes != STATUS_CODES["failed"]) & np.all(np.isfinite(primal), axis=2)
+        if not np.any(usable):
+            return None
+        distance = np.hypot(
+            (self.heights[:, None] - height_m) / FT, (self.speeds[None, :] - speed_ms) / KT
+        )  # fmt: skip
+        distance[~usable] = np.inf
+        row, column = np.unravel_index(int(np.argmin(distance)), distance.shape)
+        return self.stored_plan(int(row), int(column))
+
+    def stored_plan(self, row: int, column: int) -> StoredPlan:
+        """The plan stored at grid node (row, column), multipliers and all, as float64."""
+        from helireach_ros.planner import WarmStart
+
+        arrays = self._arrays
+        return StoredPlan(
+            height=float(self.heights[row]),
+            speed=float(self.speeds[column]),
+            status=str(self.status[row, column]),
+            value=float(self.value[row, column]),
+            time_to_land=float(self.time_to_land[row, column]),
+            warm_start=WarmStart(
+                arrays["plan_primal"][row, column].astype(float),
+                arrays["plan_bound_multipliers"][row, column].astype(float),
+                arrays["plan_constraint_multipliers"][row, column].astype(float),
+            ),
+            control_times=arrays["plan_control_times"][row, column].astype(float),
+            control_values=arrays["plan_control_values"][row, column].astype(float),
+            control_interpolation=str(self._metadata.get("control_interpolation", "zero_order_hold")),
+        )
+
+    def check_matches(
+        self,
+        airframe: Airframe | None = None,
+        settings: PlannerSettings | None = None,
+        power_fraction: float | None = None,
+        where: str = "envelope",
+    ) -> None:
+        """Raises :class:`EnvelopeError` unless the envelope was made for these (None: not checked)."""
+        metadata = self._metadata
+        if airframe is not None:
+            stored = metadata.get("airframe", {})
+            if stored.get("digest") != airframe.digest():
+                raise EnvelopeError(
+                    f"{where} was computed for airframe {stored.get('name')!r} (digest {stored.get('digest')}, "
+                    f"{_describe_conditions(stored)}), not for {airframe.name!r} (digest {airframe.digest()}, "
+                    f"{_describe_conditions(airframe.as_dict())}); compute an envelope for it with "
+                    f"'helireach envelope compute'"
+                )
+        if settings is not None:
+            differences = settings_differences(metadata.get("settings", {}), settings)
+            if differences:
+                raise EnvelopeError(f"{where} was computed with other planner settings: {'; '.join(differences)}")
+        if power_fraction is not None and not math.isclose(
+            float(metadata.get("power_fraction", math.nan)), float(power_fraction), rel_tol=0.0, abs_tol=1e-9
+        ):
+            raise EnvelopeError(f"{where} is for power fraction {metadata.get('power_fraction')}, not {power_fraction}")
+
+    def __repr__(self) -> str:
+        counts = {name: int(np.sum(self.status == name)) for name in STATUS_CODES}
+        return (
+            f"Envelope({self.airframe_name}, {self.heights.size}x{self.speeds.size}, power_fraction="
+            f"{self.power_fraction:g}, {counts}, id={self.envelope_id})"
+        )
+
+
+def settings_differences(stored: dict[str, Any], settings: PlannerSettings) -> list[str]:
+    """The fields where stored settings (a dict) and ``settings`` differ, as ``name: stored != given``."""
+    import dataclasses
+
+    given = dataclasses.asdict(settings)
+    return [
+        f"{name}: {stored.get(name)!r} != {given.get(name)!r}"
+        for name in sorted(set(stored) | set(given))
+        if stored.get(name) != given.get(name)
+    ]
+
+
+def _describe_conditions(airframe: dict[str, Any]) -> str:
+    try:
+        from helireach_ros.units import LBF
+
+        return (
+            f"W = {float(airframe['gross_weight']) / LBF:.0f} lbf, "
+            f"density altitude {float(airframe['density_altitude']) / FT:.0f} ft"
+        )
+    except (KeyError, TypeError, ValueError):
+        return "conditions unknown"
+
+
+def _enclosing_nodes(axis: np.ndarray, x: float, tolerance: float = 1e-9) -> list[int] | None:
+    """Indices of the grid nodes enclosing x along one axis (1 on a node, 2 between), None outside."""
+    if not math.isfinite(x):
+        return None
+    scale = tolerance * max(1.0, float(axis[-1] - axis[0]))
+    if x < axis[0] - scale or x > axis[-1] + scale:
+        return None
+    index = int(np.clip(np.searchsorted(axis, x, side="right") - 1, 0, axis.size - 2))
+    fraction = (x - axis[index]) / (axis[index + 1] - axis[index])
+    if fraction <= tolerance:
+        return [index]
+    if fraction >= 1.0 - tolerance:
+        return [index + 1]
+    return [index, index + 1]
+
+
+class _MarginGeometry:
+    """Rectangles (in ft, kt) whose union is the closure of the not-proven-safe set, and of the safe set.
+
+    Under the node rule, the not-proven-safe set is the union of the grid cells with a non-safe
+    corner (each closed cell); the safe set's closure is the union of all-safe cells, edges with
+    two safe ends, and safe nodes. A margin is the distance to the other set.
+    """
+
+    def __init__(self, heights_ft: np.ndarray, speeds_kt: np.ndarray, safe: np.ndarray) -> None:
+        corners_safe = safe[:-1, :-1] & safe[1:, :-1] & safe[:-1, 1:] & safe[1:, 1:]
+        rows, columns = np.meshgrid(np.arange(heights_ft.size - 1), np.arange(speeds_kt.size - 1), indexing="ij")
+
+        def cells(mask):
+            r, c = rows[mask], columns[mask]
+            return np.stack([heights_ft[r], heights_ft[r + 1], speeds_kt[c], speeds_kt[c + 1]], axis=1)
+
+        self.unsafe_rectangles = cells(~corners_safe)
+        vertical = safe[:-1, :] & safe[1:, :]  # edges along heights
+        horizontal = safe[:, :-1] & safe[:, 1:]  # edges along speeds
+        r, c = np.nonzero(vertical)
+        vertical_edges = np.stack([heights_ft[r], heights_ft[r + 1], speeds_kt[c], speeds_kt[c]], axis=1)
+        r, c = np.nonzero(horizontal)
+        horizontal_edges = np.stack([heights_ft[r], heights_ft[r], speeds_kt[c], speeds_kt[c + 1]], axis=1)
+        r, c = np.nonzero(safe)
+        nodes = np.stack([heights_ft[r], heights_ft[r], speeds_kt[c], speeds_kt[c]], axis=1)
+        self.safe_rectangles = np.concatenate([cells(corners_safe), vertical_edges, horizontal_edges, nodes])
+
+    @staticmethod
+    def _distance(rectangles: np.ndarray, height_ft: float, speed_kt: float) -> float:
+        if rectangles.shape[0] == 0:
+            return math.inf
+        dy = np.maximum(np.maximum(rectangles[:, 0] - height_ft, height_ft - rectangles[:, 1]), 0.0)
+        dx = np.maximum(np.maximum(rectangles[:, 2] - speed_kt, speed_kt - rectangles[:, 3]), 0.0)
+        return float(np.min(np.hypot(dx, dy)))
+
+    def margin(self, height_ft: float, speed_kt: float, safe: bool) -> float:
+        if safe:
+            return self._distance(self.unsafe_rectangles, height_ft, speed_kt)
+        return -self._distance(self.safe_rectangles, height_ft, speed_kt)
+
+
+def save_envelope(envelope: Envelope, path: str | os.PathLike[str]) -> Path:
+    """Writes an envelope atomically (temporary file + rename) with its checksum.
+
+    Returns:
+        The path written.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    arrays = envelope.arrays
+    metadata_json = envelope._metadata_json
+    payload = {name: np.ascontiguousarray(array) for name, array in arrays.items()}
+    payload["metadata_json"] = np.frombuffer(metadata_json, dtype=np.uint8)
+    payload["checksum"] = np.frombuffer(envelope.checksum.encode(), dtype=np.uint8)
+    temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+    try:
+        with open(temporary, "wb") as handle:
+            np.savez_compressed(handle, **payload)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, target)
+    finally:
+        temporary.unlink(missing_ok=True)
+    return target
+
+
+def read_envelope_file(path: str | os.PathLike[str], allow_partial: bool = False) -> Envelope:
+    """Reads and checks an envelope file (checksum, format, shapes) without matching it to anything.
+
+    Args:
+        path: the ``.npz`` file.
+        allow_partial: accept a partial file from an interrupted computation (for ``--resume``).
+
+    Raises:
+        EnvelopeError: missing, unreadable, truncated, corrupt, of another format, or partial.
+    """
+    source = Path(path)
+    try:
+        raw = source.read_bytes()
+    except OSError as error:
+        raise EnvelopeError(f"envelope file {str(source)!r}: cannot read: {error.strerror or error}") from None
+    try:
+        with np.load(io.BytesIO(raw), allow_pickle=False) as archive:
+            contents = {name: archive[name] for name in archive.files}
+    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError) as error:
+        raise EnvelopeError(
+            f"envelope file {str(source)!r} is truncated or corrupt (not a readable .npz archive): {error}"
+        ) from None
+    try:
+        metadata_json = contents.pop("metadata_json").tobytes()
+        stored_checksum = contents.pop("checksum").tobytes().decode("ascii")
+        metadata = json.loads(metadata_json)
+    except (KeyError, UnicodeDecodeError, json.JSONDecodeError) as error:
+        raise EnvelopeError(f"envelope file {str(source)!r} has no valid metadata/checksum: {error}") from None
+    if _content_checksum(contents, metadata_json) != stored_checksum:
+        raise EnvelopeError(f"envelope file {str(source)!r} is corrupt: its content does not match its checksum")
+    if not isinstance(metadata, dict) or metadata.get("format") != FORMAT_NAME:
+        raise EnvelopeError(f"{str(source)!r} is not a {FORMAT_NAME} file")
+    if int(metadata.get("format_version", -1)) != FORMAT_VERSION:
+        raise EnvelopeError(
+            f"envelope file {str(source)!r} has format version {metadata.get('format_version')}, this software "
+            f"reads version {FORMAT_VERSION}; recompute it"
+        )
+    try:
+        envelope = Envelope(contents, metadata)
+    except EnvelopeError as error:
+        raise EnvelopeError(f"envelope file {str(source)!r}: {error}") from None
+    if not allow_partial and not envelope.complete:
+        done = int(np.sum(envelope.arrays["status_code"] != PENDING))
+        raise EnvelopeError(
+            f"envelope file {str(source)!r} is a partial result of an interrupted computation ({done} of "
+            f"{envelope.status.size} nodes solved, not all checked and refined); finish it with "
+            f"'helireach envelope compute ... --resume'"
+        )
+    return envelope
+
+
+def load_envelope(
+    path: str | os.PathLike[str],
+    airframe: Airframe | None = None,
+    settings: PlannerSettings | None = None,
+    power_fraction: float | None = None,
+) -> Envelope:
+    """Loads a complete envelope and checks that it was made for the given airframe/settings/power.
+
+    Args:
+        path: the ``.npz`` file.
+        airframe: if given, must equal the envelope's airframe (by digest).
+        settings: if given, must equal the envelope's planner settings (every field).
+        power_fraction: if given, must equal the envelope's power fraction.
+
+    Raises:
+        EnvelopeError: naming the file, for a missing/corrupt/truncated/partial file or a mismatch.
+    """
+    envelope = read_envelope_file(path)
+    envelope.check_matches(airframe, settings, power_fraction, where=f"envelope file {str(path)!r}")
+    return envelope
+
+
+def default_envelope_path() -> Path:
+    """The shipped ``uh60a_class`` total-power-loss envelope (installed share or source tree)."""
+    try:
+        return config_path(DEFAULT_ENVELOPE)
+    except FileNotFoundError:
+        return Path(__file__).resolve().parent.parent / "config" / DEFAULT_ENVELOPE

@@ -1,0 +1,217 @@
+"""``helireach envelope compute | query | plot``: H-V envelopes from the command line.
+
+Examples::
+
+    helireach envelope compute --airframe uh60a_class --speeds-kt 0:120:25 --heights-ft 0:800:41 --out hv.npz
+    helireach envelope compute --weights-lb 14000,16000 --density-altitude-ft 0,4000 --scheduler tcp://host:8786 \\
+        --out sweep/            # one file per combination in the folder
+    helireach envelope query hv.npz --height-ft 200 --speed-kt 20 --json
+    helireach envelope plot hv.npz --out hv.png
+
+Heavy imports (CasADi, Dask, matplotlib) stay inside the handlers so ``helireach --help`` is fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+from pathlib import Path
+
+__all__ = ["register"]
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds ``envelope`` with its ``compute``, ``query`` and ``plot`` subcommands."""
+    parser = subparsers.add_parser(
+        "envelope",
+        help="H-V envelopes: compute, query, plot",
+        description="Height-velocity envelopes: where a safe landing after an engine failure is reachable.",
+    )
+    commands = parser.add_subparsers(dest="envelope_command", required=True, metavar="SUBCOMMAND")
+
+    compute = commands.add_parser(
+        "compute",
+        help="compute an envelope (or a sweep over weights and density altitudes)",
+        description="One verified landing plan per (height, speed) node, warm-started along columns, suspicious "
+        "nodes re-solved cold, the boundary bisected to 2 ft / 1 kt. Ctrl-C saves a partial file; --resume "
+        "continues it. With more than one --weights-lb/--density-altitude-ft combination, --out is a folder "
+        "holding one file per combination.",
+    )
+    compute.add_argument("--airframe", default="uh60a_class", help="airframe name or YAML path (default: %(default)s)")
+    compute.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
+    compute.add_argument("--heights-ft", default="0:800:41", help="start:stop:count, inclusive (default: %(default)s)")
+    compute.add_argument("--speeds-kt", default="0:120:25", help="start:stop:count, inclusive (default: %(default)s)")
+    compute.add_argument(
+        "--power-fraction", type=float, default=0.0, help="engine power left, fraction of trim (default: 0)"
+    )
+    compute.add_argument("--weights-lb", default=None, help="comma-separated gross weights, lbf (sweep)")
+    compute.add_argument("--density-altitude-ft", default=None, help="comma-separated density altitudes, ft (sweep)")
+    where = compute.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None, help="local worker processes (default: every core)")
+    where.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    compute.add_argument("--out", required=True, help="output .npz (a folder for a sweep of several combinations)")
+    compute.add_argument("--resume", action="store_true", help="continue the partial file(s) at --out")
+    compute.add_argument("--quiet", action="store_true", help="no progress output")
+    compute.set_defaults(handler=_compute)
+
+    query = commands.add_parser("query", help="status, value and margin at a height and speed")
+    query.add_argument("file", help="envelope .npz")
+    query.add_argument("--height-ft", type=float, required=True)
+    query.add_argument("--speed-kt", type=float, required=True)
+    query.add_argument("--airframe", default=None, help="refuse the file unless it is for this airframe")
+    query.add_argument("--json", action="store_true", help="print JSON (status, value, margin, ...)")
+    query.set_defaults(handler=_query)
+
+    plot = commands.add_parser("plot", help="the flight-manual H-V diagram as an image")
+    plot.add_argument("file", help="envelope .npz")
+    plot.add_argument("--out", required=True, help="image file (.png, .svg, .pdf)")
+    plot.add_argument("--title", default=None, help="extra title text")
+    plot.set_defaults(handler=_plot)
+
+
+def _error(message: str) -> int:
+    print(f"helireach envelope: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _compute(arguments: argparse.Namespace) -> int:
+    from helireach_ros.airframe import ConfigError, load_airframe
+    from helireach_ros.envelope import EnvelopeError
+    from helireach_ros.envelope_compute import (
+        ComputeInterrupted,
+        EnvelopeJob,
+        Progress,
+        compute_envelope,
+        condition_file_name,
+        make_executor,
+        parse_list,
+        parse_range,
+    )
+    from helireach_ros.settings import load_settings
+    from helireach_ros.units import FT, KT, LBF
+
+    try:
+        airframe = load_airframe(arguments.airframe)
+        settings = load_settings(arguments.settings)
+        heights = parse_range(arguments.heights_ft, FT, "--heights-ft")
+        speeds = parse_range(arguments.speeds_kt, KT, "--speeds-kt")
+        weights = parse_list(arguments.weights_lb, "--weights-lb") if arguments.weights_lb else [None]
+        altitudes = (
+            parse_list(arguments.density_altitude_ft, "--density-altitude-ft")
+            if arguments.density_altitude_ft
+            else [None]
+        )
+        airframes = [
+            airframe.with_conditions(
+                gross_weight=None if weight is None else weight * LBF,
+                density_altitude=None if altitude is None else altitude * FT,
+            )
+            for weight in weights
+            for altitude in altitudes
+        ]
+        jobs = [EnvelopeJob(a, settings, arguments.power_fraction, heights, speeds) for a in airframes]
+    except (ConfigError, ValueError) as error:
+        return _error(str(error))
+    out = Path(arguments.out)
+    if len(jobs) == 1 and not out.is_dir():
+        paths = [out]
+    else:
+        paths = [out / condition_file_name(job.airframe, job.power_fraction) for job in jobs]
+    command = "helireach " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["envelope"] else None
+    grid_spec = {"heights_ft": arguments.heights_ft, "speeds_kt": arguments.speeds_kt}
+    try:
+        executor = make_executor(arguments.workers, arguments.scheduler)
+    except (ValueError, OSError) as error:
+        return _error(f"cannot start the workers: {error}")
+    try:
+        for index, (job, path) in enumerate(zip(jobs, paths, strict=True)):
+            label = f"[{index + 1}/{len(jobs)}] " if len(jobs) > 1 else ""
+            progress = None if arguments.quiet else Progress(sys.stderr, label=label)
+            if progress:
+                progress.message(
+                    f"{label}{job.airframe.name}, W = {job.airframe.gross_weight / LBF:.0f} lbf, density altitude "
+                    f"{job.airframe.density_altitude / FT:.0f} ft, power fraction {job.power_fraction:g}: "
+                    f"{len(heights)} x {len(speeds)} nodes on {executor.description} -> {path}"
+                )
+            if path.exists() and not arguments.resume and _is_partial(path):
+                return _error(f"{path} is a partial envelope; continue it with --resume, or delete it to start over")
+            envelope = compute_envelope(
+                job, executor, path, resume=arguments.resume and path.exists(), progress=progress,
+                command=command, grid_spec=grid_spec,
+            )  # fmt: skip
+            counts = {name: int((envelope.status == name).sum()) for name in ("safe", "unsafe", "unverified", "failed")}
+            compute = envelope.metadata.get("compute", {})
+            print(
+                f"{path}: envelope {envelope.envelope_id}: {counts}, {len(envelope.boundary)} boundary points, "
+                f"{compute.get('wall_time_s', float('nan')):.1f} s"
+            )
+    except ComputeInterrupted as interrupted:
+        print(f"interrupted: partial envelope saved to {interrupted.path}; continue with --resume", file=sys.stderr)
+        return 130
+    except EnvelopeError as error:
+        return _error(str(error))
+    finally:
+        executor.close()
+    return 0
+
+
+def _is_partial(path: Path) -> bool:
+    from helireach_ros.envelope import EnvelopeError, read_envelope_file
+
+    try:
+        return not read_envelope_file(path, allow_partial=True).complete
+    except EnvelopeError:
+        return False  # unreadable: nothing to resume, overwrite it
+
+
+def _query(arguments: argparse.Namespace) -> int:
+    from helireach_ros.envelope import EnvelopeError, load_envelope
+    from helireach_ros.units import FT, KT
+
+    try:
+        airframe = None
+        if arguments.airframe:
+            from helireach_ros.airframe import ConfigError, load_airframe
+
+            try:
+                airframe = load_airframe(arguments.airframe)
+            except ConfigError as error:
+                return _error(str(error))
+        envelope = load_envelope(arguments.file, airframe=airframe)
+    except EnvelopeError as error:
+        return _error(str(error))
+    answer = envelope.query(arguments.height_ft * FT, arguments.speed_kt * KT)
+    if arguments.json:
+        document = answer.to_dict() | {
+            "height_ft": arguments.height_ft,
+            "speed_kt": arguments.speed_kt,
+            "margin_units": "ft/kt",
+            "envelope_id": envelope.envelope_id,
+            "airframe": envelope.airframe_name,
+            "power_fraction": envelope.power_fraction,
+        }
+        print(json.dumps(document))
+    else:
+        print(
+            f"{arguments.height_ft:g} ft, {arguments.speed_kt:g} kt: {answer.status} (value {answer.value:.3f}, "
+            f"margin {answer.margin:.1f} ft/kt) [{envelope.airframe_name}, envelope {envelope.envelope_id}]"
+        )
+    return 0
+
+
+def _plot(arguments: argparse.Namespace) -> int:
+    from helireach_ros.envelope import EnvelopeError, load_envelope
+    from helireach_ros.envelope_plot import plot_envelope
+
+    try:
+        envelope = load_envelope(arguments.file)
+    except EnvelopeError as error:
+        return _error(str(error))
+    try:
+        path = plot_envelope(envelope, arguments.out, title_extra=arguments.title)
+    except (OSError, ValueError) as error:
+        return _error(f"cannot write {arguments.out}: {error}")
+    print(path)
+    return 0

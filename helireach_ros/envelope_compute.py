@@ -1,0 +1,892 @@
+"""Computing H-V envelopes: one verified landing plan per grid node, in parallel or on Dask.
+
+For every node (h, V) of a height × speed grid, the helicopter flies level at trim when the
+engine fails (:func:`~helireach_ros.model.initial_state_after_failure`); the planner decides
+whether a safe landing is reachable from there. The work runs in three phases:
+
+1. **Sweep.** One task per speed column, heights ascending. The first node is solved cold; each
+   next node is warm-started from the previous node's plan if that plan was ``safe`` (a warm start
+   from an unsafe plan could drag the next node into the same crash), otherwise cold.
+2. **Cold re-check.** Every warm-started node whose value is near 0 (``|J| < NEAR_ZERO_VALUE``) or
+   whose status differs from a 4-neighbour is solved again cold, and the more conservative of the
+   two answers is kept (status rank safe < unverified < failed < unsafe, then the larger value), so
+   a warm start never carries an optimistic answer across the boundary. Repeated until no such node
+   is left unchecked.
+3. **Boundary refinement.** On every grid line between a safe and an unsafe node, the boundary is
+   located to within ``2 ft`` / ``1 kt`` by regula falsi on the value (bisection as a safeguard),
+   each trial warm-started from the plan of the current safe end. The final safe end is confirmed
+   by a cold solve; if that disagrees, the search is redone from the last confirmed point with every
+   safe answer confirmed cold. The stored boundary point is the last point proven safe (warm and
+   cold), so the refined curve never moves into the unsafe set on a warm start's word.
+
+Warm starts between tasks always pass through the stored float32 form of a plan, so the result
+does not depend on where or in which order tasks ran: serial, local processes and a Dask cluster
+give identical envelopes, and a resumed computation equals an uninterrupted one.
+
+Ctrl-C (or SIGTERM) saves a partial envelope file; ``resume=True`` continues it. Tasks that were
+running are redone (a sweep task is one column, a few seconds of work).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime
+import logging
+import math
+import multiprocessing
+import os
+import platform
+import signal
+import sys
+import time
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+from helireach_ros import __version__
+from helireach_ros.airframe import Airframe
+from helireach_ros.envelope import (
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    PENDING,
+    STATUS_CODES,
+    Envelope,
+    EnvelopeError,
+    read_envelope_file,
+    save_envelope,
+)
+from helireach_ros.settings import PlannerSettings
+from helireach_ros.units import FT, KT, LBF
+
+__all__ = [
+    "HEIGHT_TOLERANCE",
+    "NEAR_ZERO_VALUE",
+    "SPEED_TOLERANCE",
+    "ComputeInterrupted",
+    "EnvelopeJob",
+    "Progress",
+    "compute_envelope",
+    "condition_file_name",
+    "make_executor",
+    "parse_list",
+    "parse_range",
+]
+
+log = logging.getLogger(__name__)
+
+NEAR_ZERO_VALUE = 0.25
+"""|J| below which a warm-started node is re-solved cold (safe nodes far from the boundary sit near −0.6)."""
+HEIGHT_TOLERANCE = 2.0 * FT
+"""Boundary refinement along a height line stops when the bracket is this narrow, m."""
+SPEED_TOLERANCE = 1.0 * KT
+"""Boundary refinement along a speed line stops when the bracket is this narrow, m/s."""
+BOUND_MULTIPLIER_FLOOR = 1e-6
+"""Stored bound multipliers smaller than this are stored as 0: IPOPT's warm start raises every bound multiplier
+to ``warm_start_mult_bound_push`` (1e-6 in :mod:`helireach_ros.transcription`) anyway, so the warm start is
+unchanged (checked: bit-identical solutions), and the zeros compress (the shipped file shrinks by ~1/4)."""
+CHECKPOINT_INTERVAL_S = 60.0
+"""A long computation saves a partial file this often (and always on Ctrl-C)."""
+
+_SAFE, _UNSAFE, _UNVERIFIED, _FAILED = (STATUS_CODES[name] for name in ("safe", "unsafe", "unverified", "failed"))
+_RANK = {_SAFE: 0, _UNVERIFIED: 1, _FAILED: 2, _UNSAFE: 3}
+
+
+class ComputeInterrupted(KeyboardInterrupt):
+    """The computation was interrupted; a partial file was saved (``path``) if an output was given."""
+
+    def __init__(self, path: Path | None) -> None:
+        super().__init__(f"interrupted; partial envelope saved to {path}" if path else "interrupted")
+        self.path = path
+
+
+@dataclass(frozen=True)
+class EnvelopeJob:
+    """What one envelope is computed for: airframe, settings, power-loss level and grid (SI)."""
+
+    airframe: Airframe
+    settings: PlannerSettings
+    power_fraction: float
+    heights: tuple[float, ...]
+    speeds: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        for name, axis in (("heights", self.heights), ("speeds", self.speeds)):
+            values = np.asarray(axis, dtype=float)
+            if values.ndim != 1 or values.size < 2 or not np.all(np.isfinite(values)) or np.any(np.diff(values) <= 0):
+                raise ValueError(f"{name} must hold >= 2 finite, strictly ascending values")
+        if not 0.0 <= self.power_fraction <= 1.0:
+            raise ValueError(f"power fraction must lie in [0, 1], got {self.power_fraction!r}")
+
+
+@dataclass(frozen=True)
+class _Solution:
+    """One solve at one point, reduced to what the envelope stores (plans as float32)."""
+
+    status: int
+    value: float
+    time_to_land: float
+    replay_value: float
+    verified: bool
+    iterations: int
+    solve_time_ms: float
+    warm_started: bool
+    primal: np.ndarray | None = None
+    bound_multipliers: np.ndarray | None = None
+    constraint_multipliers: np.ndarray | None = None
+    control_times: np.ndarray | None = None
+    control_values: np.ndarray | None = None
+    control_interpolation: str = ""
+
+    @property
+    def conservatism(self) -> tuple[int, float]:
+        return _RANK[self.status], (math.inf if math.isnan(self.value) else self.value)
+
+
+def _more_conservative(first: _Solution, second: _Solution) -> _Solution:
+    """The answer that claims less: worse status first, then the larger value; ties keep ``first``."""
+    return second if second.conservatism > first.conservatism else first
+
+
+def _warm_start_of(solution: _Solution):
+    """The planner warm start stored in a solution (float32 → float64), or None without a plan."""
+    from helireach_ros.planner import WarmStart
+
+    if solution.primal is None or solution.status == _FAILED:
+        return None
+    return WarmStart(
+        solution.primal.astype(float),
+        solution.bound_multipliers.astype(float),
+        solution.constraint_multipliers.astype(float),
+    )
+
+
+def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None) -> _Solution:
+    """One ``plan`` from level trim at (height, speed) after the failure; errors become ``failed``."""
+    from helireach_ros.model import initial_state_after_failure
+    from helireach_ros.planner import get_planner
+
+    try:
+        state = initial_state_after_failure(job.airframe, height, speed, job.power_fraction)
+        plan = get_planner(job.airframe, job.settings).plan(state, warm_start=warm_start)
+    except (ValueError, RuntimeError) as error:  # e.g. no level trim below the stall limit
+        log.debug("solve at h=%.2f m, V=%.2f m/s failed: %s", height, speed, error)
+        return _Solution(_FAILED, math.nan, math.nan, math.nan, False, -1, 0.0, warm_start is not None)
+    failed = plan.status == "failed"
+    return _Solution(
+        status=STATUS_CODES[plan.status],
+        value=math.nan if failed else plan.value,
+        time_to_land=plan.time_to_land,
+        replay_value=plan.replay.value,
+        verified=plan.verified,
+        iterations=plan.solver.iterations,
+        solve_time_ms=plan.solver.solve_time_ms,
+        warm_started=plan.solver.warm_started,
+        primal=plan.warm_start.primal.astype(np.float32),
+        bound_multipliers=_stored_bound_multipliers(plan.warm_start.bound_multipliers),
+        constraint_multipliers=plan.warm_start.constraint_multipliers.astype(np.float32),
+        control_times=plan.control_times.astype(np.float32),
+        control_values=plan.control_values.astype(np.float32),
+        control_interpolation=plan.control_interpolation,
+    )
+
+
+def _stored_bound_multipliers(multipliers: np.ndarray) -> np.ndarray:
+    stored = multipliers.astype(np.float32)
+    stored[np.abs(stored) < BOUND_MULTIPLIER_FLOOR] = 0.0
+    return stored
+
+
+# --- tasks (module-level functions: they run in worker processes or on Dask workers) -----------------------
+
+
+def _sweep_column(job: EnvelopeJob, column: int) -> tuple[str, int, list[_Solution]]:
+    """Phase 1: one speed column, heights ascending, warm-started from the previous node when it was safe."""
+    speed = job.speeds[column]
+    solutions: list[_Solution] = []
+    warm_start = None
+    for height in job.heights:
+        solution = _solve_point(job, height, speed, warm_start)
+        solutions.append(solution)
+        warm_start = _warm_start_of(solution) if solution.status == _SAFE else None
+    return "sweep", column, solutions
+
+
+def _cold_check(job: EnvelopeJob, row: int, column: int) -> tuple[str, tuple[int, int], _Solution]:
+    """Phase 2: the node solved cold."""
+    return "check", (row, column), _solve_point(job, job.heights[row], job.speeds[column])
+
+
+@dataclass(frozen=True)
+class _BoundaryPoint:
+    edge: tuple[int, int, int, int]  # (row, column) of the safe node, then of the other node
+    safe_point: tuple[float, float]  # (height m, speed m/s): the last point proven safe
+    unsafe_point: tuple[float, float]  # the first point found not safe
+    solves: int
+    cold_solves: int
+
+
+def _next_trial(
+    safe_end: float, safe_value: float, other_end: float, other_value: float, tolerance: float, bisect: bool
+) -> float:
+    """Where to solve next on the line between the safe end and the other end (scalars along the line).
+
+    Regula falsi: the values straddle 0 (safe ≤ 0 < unsafe), so the linear zero crossing is a good
+    guess of the boundary; the trial sits 0.45 × tolerance to one side of it, on the side that
+    leaves the narrower bracket if the guess is right, so two good guesses close the bracket.
+    Falls back to the midpoint when the values do not straddle 0 or ``bisect`` is set.
+    """
+    span = other_end - safe_end
+    if bisect or not (math.isfinite(safe_value) and math.isfinite(other_value) and safe_value <= 0.0 < other_value):
+        return safe_end + 0.5 * span
+    root = safe_end + span * safe_value / (safe_value - other_value)
+    offset = math.copysign(0.45 * tolerance, span)
+    trial = root - offset if abs(other_end - root) <= abs(root - safe_end) else root + offset
+    low, high = sorted((safe_end + 0.05 * span, other_end - 0.05 * span))
+    return min(max(trial, low), high)
+
+
+def _bisect_edge(
+    job: EnvelopeJob, edge: tuple[int, int, int, int], safe_plan: _Solution, other_value: float
+) -> tuple[str, tuple[int, int, int, int], _BoundaryPoint]:
+    """Phase 3: locate the boundary between a safe node and an unsafe neighbour along their grid line.
+
+    Trial points (regula falsi with a bisection safeguard, :func:`_next_trial`) are warm-started
+    from the plan of the current safe end. The final safe end is then confirmed cold; if the cold
+    answer is not safe, the warm search was optimistic somewhere, and the search restarts from the
+    last confirmed point with every safe answer confirmed cold. The reported safe point is always
+    one where both a warm and a cold solve (or the cold-checked node itself) say safe.
+    """
+    row0, column0, row1, column1 = edge
+    along_height = column0 == column1
+    axis = job.heights if along_height else job.speeds
+    tolerance = HEIGHT_TOLERANCE if along_height else SPEED_TOLERANCE
+
+    def point(position: float) -> tuple[float, float]:
+        return (position, job.speeds[column0]) if along_height else (job.heights[row0], position)
+
+    confirmed = (axis[row0 if along_height else column0], safe_plan.value, _warm_start_of(safe_plan))
+    safe_end = confirmed
+    other_end, other = axis[row1 if along_height else column1], other_value
+    confirm_each = False
+    solves = cold_solves = 0
+    while True:
+        bisect = False
+        while abs(other_end - safe_end[0]) > tolerance:
+            width = abs(other_end - safe_end[0])
+            trial = _next_trial(safe_end[0], safe_end[1], other_end, other, tolerance, bisect)
+            answer = _solve_point(job, *point(trial), safe_end[2])
+            solves += 1
+            if answer.status == _SAFE and (confirm_each or safe_end[2] is None):
+                if safe_end[2] is not None:
+                    answer = _more_conservative(answer, _solve_point(job, *point(trial)))
+                    solves += 1
+                    cold_solves += 1
+                if answer.status == _SAFE:
+                    confirmed = (trial, answer.value, _warm_start_of(answer))
+            if answer.status == _SAFE:
+                safe_end = (trial, answer.value, _warm_start_of(answer))
+            else:
+                other_end, other = trial, answer.value
+            bisect = abs(other_end - safe_end[0]) > 0.5 * width  # a poor guess: bisect next
+        if safe_end[0] == confirmed[0]:
+            break
+        cold = _solve_point(job, *point(safe_end[0]))
+        solves += 1
+        cold_solves += 1
+        if cold.status == _SAFE:
+            break
+        other_end, other = safe_end[0], cold.value
+        safe_end, confirm_each = confirmed, True
+    boundary = _BoundaryPoint(edge, point(safe_end[0]), point(other_end), solves, cold_solves)
+    return "boundary", edge, boundary
+
+
+def _call(item: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
+    function, arguments = item
+    return function(*arguments)
+
+
+def _ignore_interrupts() -> None:
+    """Worker initialiser: Ctrl-C reaches the whole process group; only the coordinator handles it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# --- executors --------------------------------------------------------------------------------------------
+
+
+class _SerialExecutor:
+    """Runs tasks in this process (one worker)."""
+
+    description = "1 worker (in process)"
+    workers = 1
+
+    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        for arguments in tasks:
+            yield function(*arguments)
+
+    def abort(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class _ProcessExecutor:
+    """A pool of local worker processes (forkserver: workers start from a process that imported CasADi once)."""
+
+    def __init__(self, workers: int) -> None:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(["helireach_ros.envelope_compute", "helireach_ros.planner"])
+        self.workers = workers
+        self.description = f"{workers} local worker processes"
+        self._pool = context.Pool(workers, initializer=_ignore_interrupts)
+
+    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        yield from self._pool.imap_unordered(_call, [(function, arguments) for arguments in tasks], chunksize=1)
+
+    def abort(self) -> None:
+        self._pool.terminate()
+        self._pool.join()
+
+    def close(self) -> None:
+        self._pool.close()
+        self._pool.join()
+
+
+class _DaskExecutor:
+    """Tasks on a Dask distributed cluster (workers need helireach_ros installed)."""
+
+    def __init__(self, address: str, timeout_s: float = 30.0) -> None:
+        from distributed import Client
+
+        self._client = Client(address, timeout=timeout_s, set_as_default=False)
+        self.workers = max(1, sum(self._client.nthreads().values()))
+        self.description = f"Dask scheduler {address} ({self.workers} worker threads)"
+        self._futures: list[Any] = []
+
+    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        from distributed import as_completed
+
+        self._futures = [self._client.submit(function, *arguments, pure=False) for arguments in tasks]
+        for _, result in as_completed(self._futures, with_results=True):
+            yield result
+        self._futures = []
+
+    def abort(self) -> None:
+        if self._futures:
+            self._client.cancel(self._futures)
+        self._futures = []
+
+    def close(self) -> None:
+        self._client.close()
+
+
+def make_executor(workers: int | None = None, scheduler: str | None = None):
+    """The executor for ``--workers N`` (default: every core) or ``--scheduler ADDRESS`` (Dask).
+
+    Returns:
+        An object with ``map_unordered(function, tasks)``, ``abort()``, ``close()``, ``description``.
+    """
+    if scheduler:
+        return _DaskExecutor(scheduler)
+    count = workers if workers is not None else (os.cpu_count() or 1)
+    if count < 1:
+        raise ValueError(f"workers must be >= 1, got {count}")
+    return _SerialExecutor() if count == 1 else _ProcessExecutor(count)
+
+
+# --- progress ---------------------------------------------------------------------------------------------
+
+
+class Progress:
+    """Cells done, rate and ETA: a redrawn bar on an interactive terminal, else a log line every ~10 %/10 s."""
+
+    def __init__(self, stream: IO[str] | None = None, interactive: bool | None = None, label: str = "") -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.interactive = self.stream.isatty() if interactive is None else interactive
+        self.label = label
+        self._phase, self._total, self._done, self._started, self._shown = "", 0, 0, 0.0, 0.0
+        self._last_fraction = -1.0
+
+    def start(self, phase: str, total: int) -> None:
+        self._phase, self._total, self._done = phase, total, 0
+        self._started = self._shown = time.monotonic()
+        self._last_fraction = -1.0
+        if total:
+            self._show(force=True)
+
+    def advance(self, count: int = 1) -> None:
+        self._done += count
+        self._show(force=self._done >= self._total)
+
+    def finish(self) -> None:
+        if self.interactive and self._total:
+            self.stream.write("\n")
+            self.stream.flush()
+
+    def message(self, text: str) -> None:
+        if self.interactive:
+            self.stream.write("\r\033[K")
+        self.stream.write(text + "\n")
+        self.stream.flush()
+
+    def _show(self, force: bool = False) -> None:
+        now = time.monotonic()
+        elapsed = now - self._started
+        rate = self._done / elapsed if elapsed > 0 else 0.0
+        remaining = (self._total - self._done) / rate if rate > 0 else math.nan
+        fraction = self._done / self._total if self._total else 1.0
+        eta = f"ETA {remaining:5.0f} s" if math.isfinite(remaining) else "ETA    ? s"
+        prefix = f"{self.label}{self._phase}"
+        if self.interactive:
+            if not force and now - self._shown < 0.1:
+                return
+            width = 30
+            bar = "#" * int(width * fraction) + "-" * (width - int(width * fraction))
+            self.stream.write(f"\r\033[K{prefix} [{bar}] {self._done}/{self._total} {rate:6.1f}/s {eta}")
+        else:
+            if not force and fraction - self._last_fraction < 0.1 and now - self._shown < 10.0:
+                return
+            self._last_fraction = fraction
+            self.stream.write(f"{prefix}: {self._done}/{self._total} ({100 * fraction:.0f} %), {rate:.1f}/s, {eta}\n")
+        self._shown = now
+        self.stream.flush()
+
+
+class _NullProgress(Progress):
+    """Reports nothing (library use without a progress display)."""
+
+    def __init__(self) -> None:
+        super().__init__(stream=sys.stderr, interactive=False)
+
+    def start(self, phase: str, total: int) -> None:
+        pass
+
+    def advance(self, count: int = 1) -> None:
+        pass
+
+    def finish(self) -> None:
+        pass
+
+    def message(self, text: str) -> None:
+        log.info("%s", text)
+
+
+class _InterruptGuard:
+    """Turns Ctrl-C/SIGTERM into a request checked between tasks; a second Ctrl-C interrupts at once.
+
+    A KeyboardInterrupt raised inside a CasADi solve could be reported by IPOPT as a stopped (failed)
+    solve and stored as a result; a flag read between tasks cannot corrupt a result.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous: dict[int, Any] = {}
+
+    def __enter__(self) -> _InterruptGuard:
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self._previous[signum] = signal.signal(signum, self._handle)
+            except ValueError:  # not the main thread: leave signals alone
+                break
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        for signum, handler in self._previous.items():
+            signal.signal(signum, handler)
+
+    def _handle(self, signum: int, frame: object) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def check(self) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+
+
+# --- the computation's state -----------------------------------------------------------------------------
+
+
+class _EnvelopeState:
+    """Per-node results and boundary points so far; converts to (partial or complete) :class:`Envelope`."""
+
+    def __init__(self, job: EnvelopeJob) -> None:
+        self.job = job
+        shape = (len(job.heights), len(job.speeds))
+        self.shape = shape
+        self.solutions: dict[tuple[int, int], _Solution] = {}
+        self.cold_checked = np.zeros(shape, bool)
+        self.disagree = np.zeros(shape, bool)
+        self.boundary: dict[tuple[int, int, int, int], _BoundaryPoint] = {}
+        self.counters = {"sweep_solves": 0, "sweep_warm_solves": 0, "cold_rechecks": 0, "bisection_solves": 0,
+                         "bisection_cold_solves": 0}  # fmt: skip
+        self.phase_seconds: dict[str, float] = {}
+        self.previous_wall_time_s = 0.0
+
+    # node access
+    def codes(self) -> np.ndarray:
+        codes = np.full(self.shape, PENDING, np.int8)
+        for (row, column), solution in self.solutions.items():
+            codes[row, column] = solution.status
+        return codes
+
+    def values(self) -> np.ndarray:
+        values = np.full(self.shape, np.nan)
+        for (row, column), solution in self.solutions.items():
+            values[row, column] = solution.value
+        return values
+
+    def set_column(self, column: int, solutions: list[_Solution]) -> None:
+        for row, solution in enumerate(solutions):
+            self.solutions[(row, column)] = solution
+            self.cold_checked[row, column] = not solution.warm_started
+        self.counters["sweep_solves"] += len(solutions)
+        self.counters["sweep_warm_solves"] += sum(solution.warm_started for solution in solutions)
+
+    def merge_cold(self, cell: tuple[int, int], cold: _Solution) -> None:
+        current = self.solutions[cell]
+        self.disagree[cell] = current.status != cold.status
+        self.solutions[cell] = _more_conservative(current, cold)
+        self.cold_checked[cell] = True
+        self.counters["cold_rechecks"] += 1
+
+    def add_boundary(self, point: _BoundaryPoint) -> None:
+        self.boundary[point.edge] = point
+        self.counters["bisection_solves"] += point.solves
+        self.counters["bisection_cold_solves"] += point.cold_solves
+
+    # conversion
+    def to_envelope(self, metadata: dict[str, Any], complete: bool) -> Envelope:
+        shape = self.shape
+        sizes = _plan_sizes(self.solutions.values())
+        arrays: dict[str, np.ndarray] = {
+            "heights": np.asarray(self.job.heights, float),
+            "speeds": np.asarray(self.job.speeds, float),
+            "status_code": self.codes(),
+            "value": self.values(),
+            "cold_checked": self.cold_checked.copy(),
+            "warm_cold_disagree": self.disagree.copy(),
+        }
+        scalar_fields = {
+            "time_to_land": (float, np.nan), "replay_value": (float, np.nan), "verified": (bool, False),
+            "iterations": (np.int32, -1), "solve_time_ms": (np.float32, np.nan), "warm_started": (bool, False),
+        }  # fmt: skip
+        for name, (dtype, fill) in scalar_fields.items():
+            array = np.full(shape, fill, dtype)
+            for cell, solution in self.solutions.items():
+                array[cell] = getattr(solution, name)
+            arrays[name] = array
+        plan_fields = {
+            "plan_primal": "primal", "plan_bound_multipliers": "bound_multipliers",
+            "plan_constraint_multipliers": "constraint_multipliers", "plan_control_times": "control_times",
+            "plan_control_values": "control_values",
+        }  # fmt: skip
+        for name, attribute in plan_fields.items():
+            array = np.full(shape + sizes[attribute], np.nan, np.float32)
+            for cell, solution in self.solutions.items():
+                stored = getattr(solution, attribute)
+                if stored is not None and stored.shape == sizes[attribute]:
+                    array[cell] = stored
+            arrays[name] = array
+        edges = sorted(self.boundary)
+        arrays["boundary"] = np.array([self.boundary[e].safe_point for e in edges], float).reshape(-1, 2)
+        arrays["boundary_unsafe_side"] = np.array([self.boundary[e].unsafe_point for e in edges], float).reshape(-1, 2)
+        arrays["boundary_edge"] = np.array(edges, np.int16).reshape(-1, 4)
+        metadata = dict(metadata, complete=complete)
+        metadata["control_interpolation"] = next(
+            (s.control_interpolation for s in self.solutions.values() if s.control_interpolation), ""
+        )
+        return Envelope(arrays, metadata)
+
+    @classmethod
+    def from_envelope(cls, job: EnvelopeJob, envelope: Envelope) -> _EnvelopeState:
+        state = cls(job)
+        arrays = envelope.arrays
+        interpolation = envelope.metadata.get("control_interpolation", "")
+        for row, column in zip(*np.nonzero(arrays["status_code"] != PENDING), strict=True):
+            cell = (int(row), int(column))
+            primal = arrays["plan_primal"][cell]
+            has_plan = bool(np.all(np.isfinite(primal))) and primal.size > 0
+            state.solutions[cell] = _Solution(
+                status=int(arrays["status_code"][cell]),
+                value=float(arrays["value"][cell]),
+                time_to_land=float(arrays["time_to_land"][cell]),
+                replay_value=float(arrays["replay_value"][cell]),
+                verified=bool(arrays["verified"][cell]),
+                iterations=int(arrays["iterations"][cell]),
+                solve_time_ms=float(arrays["solve_time_ms"][cell]),
+                warm_started=bool(arrays["warm_started"][cell]),
+                primal=primal.copy() if has_plan else None,
+                bound_multipliers=arrays["plan_bound_multipliers"][cell].copy() if has_plan else None,
+                constraint_multipliers=arrays["plan_constraint_multipliers"][cell].copy() if has_plan else None,
+                control_times=arrays["plan_control_times"][cell].copy() if has_plan else None,
+                control_values=arrays["plan_control_values"][cell].copy() if has_plan else None,
+                control_interpolation=interpolation if has_plan else "",
+            )
+        state.cold_checked = arrays["cold_checked"].copy()
+        state.disagree = arrays["warm_cold_disagree"].copy()
+        for index, edge in enumerate(arrays["boundary_edge"].tolist()):
+            key = tuple(int(e) for e in edge)
+            state.boundary[key] = _BoundaryPoint(
+                key, tuple(arrays["boundary"][index].tolist()), tuple(arrays["boundary_unsafe_side"][index].tolist()),
+                0, 0,
+            )  # fmt: skip
+        compute = envelope.metadata.get("compute", {})
+        state.counters.update({k: int(v) for k, v in compute.get("counters", {}).items() if k in state.counters})
+        state.previous_wall_time_s = float(compute.get("wall_time_s", 0.0))
+        return state
+
+
+def _plan_sizes(solutions: Iterable[_Solution]) -> dict[str, tuple[int, ...]]:
+    for solution in solutions:
+        if solution.primal is not None:
+            return {
+                name: getattr(solution, name).shape
+                for name in ("primal", "bound_multipliers", "constraint_multipliers", "control_times", "control_values")
+            }
+    return {name: (0,) for name in ("primal", "bound_multipliers", "constraint_multipliers", "control_times")} | {
+        "control_values": (2, 0)
+    }
+
+
+# --- the driver -------------------------------------------------------------------------------------------
+
+
+def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, str] | None) -> dict[str, Any]:
+    import casadi
+
+    airframe = job.airframe.as_dict() | {"digest": job.airframe.digest()}
+    return {
+        "format": FORMAT_NAME,
+        "format_version": FORMAT_VERSION,
+        "description": "H-V envelope: verified landing analysis from level trim after an engine failure on a "
+        "height x speed grid (Kirchner et al. 2020 reachability; helireach_ros)",
+        "units": {
+            "heights": "m",
+            "speeds": "m/s",
+            "value": "1 (<= 0: safe landing reachable)",
+            "time_to_land": "s",
+            "boundary": "(height m, speed m/s)",
+            "margin": "ft and kt in one plane (1 ft = 1 kt = 1)",
+        },
+        "grid": dict(grid_spec or {}, heights_count=len(job.heights), speeds_count=len(job.speeds)),
+        "airframe": airframe,
+        "settings": dataclasses.asdict(job.settings),
+        "method": job.settings.method,
+        "power_fraction": float(job.power_fraction),
+        "status_codes": dict(STATUS_CODES, pending=PENDING),
+        "plan_storage": "float32 per node: NLP primal, bound and constraint multipliers (planner.WarmStart); "
+        "control breakpoints and values",
+        "refinement": {
+            "near_zero_value": NEAR_ZERO_VALUE,
+            "height_tolerance_m": HEIGHT_TOLERANCE,
+            "speed_tolerance_m_s": SPEED_TOLERANCE,
+        },
+        "software": {
+            "helireach_ros": __version__,
+            "casadi": casadi.__version__,
+            "numpy": np.__version__,
+            "python": platform.python_version(),
+        },
+        "command": command,
+    }
+
+
+def _check_resumable(job: EnvelopeJob, envelope: Envelope, path: Path) -> None:
+    where = f"partial envelope {str(path)!r}"
+    envelope.check_matches(job.airframe, job.settings, job.power_fraction, where=where)
+    if envelope.heights.shape != (len(job.heights),) or not np.allclose(envelope.heights, job.heights, atol=1e-9):
+        raise EnvelopeError(f"{where} has another height grid than requested")
+    if envelope.speeds.shape != (len(job.speeds),) or not np.allclose(envelope.speeds, job.speeds, atol=1e-9):
+        raise EnvelopeError(f"{where} has another speed grid than requested")
+
+
+def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
+    """Warm-solved nodes not yet checked cold whose value is near 0 or whose status differs from a neighbour."""
+    codes, values = state.codes(), state.values()
+    differs = np.zeros(state.shape, bool)
+    vertical, horizontal = codes[:-1, :] != codes[1:, :], codes[:, :-1] != codes[:, 1:]
+    differs[:-1, :] |= vertical
+    differs[1:, :] |= vertical
+    differs[:, :-1] |= horizontal
+    differs[:, 1:] |= horizontal
+    with np.errstate(invalid="ignore"):
+        near_zero = np.abs(values) < NEAR_ZERO_VALUE
+    candidates = (codes != PENDING) & ~state.cold_checked & (near_zero | differs)
+    return [(int(r), int(c)) for r, c in zip(*np.nonzero(candidates), strict=True)]
+
+
+def _boundary_edges(state: _EnvelopeState) -> list[tuple[int, int, int, int]]:
+    """Grid-line neighbours (safe node first) where the other node is unsafe."""
+    codes = state.codes()
+    other = codes == _UNSAFE
+    safe = codes == _SAFE
+    edges = []
+    rows, columns = state.shape
+    for row in range(rows):
+        for column in range(columns):
+            if not safe[row, column]:
+                continue
+            for d_row, d_column in ((1, 0), (-1, 0), (0, 1), (0, -1)):
+                r, c = row + d_row, column + d_column
+                if 0 <= r < rows and 0 <= c < columns and other[r, c]:
+                    edges.append((row, column, r, c))
+    return edges
+
+
+def compute_envelope(
+    job: EnvelopeJob,
+    executor=None,
+    out_path: str | os.PathLike[str] | None = None,
+    resume: bool = False,
+    progress: Progress | None = None,
+    command: str | None = None,
+    grid_spec: dict[str, str] | None = None,
+) -> Envelope:
+    """Computes (or resumes) one envelope; saves it to ``out_path`` if given.
+
+    Args:
+        job: airframe, settings, power fraction and grid.
+        executor: from :func:`make_executor` (default: serial in this process).
+        out_path: the ``.npz`` to write (also where a partial file goes on Ctrl-C).
+        resume: continue the partial file at ``out_path``.
+        progress: progress reporting (default: none).
+        command: the command line to record in the metadata.
+        grid_spec: the grid as the user wrote it (recorded in the metadata).
+
+    Returns:
+        The complete envelope.
+
+    Raises:
+        ComputeInterrupted: on Ctrl-C/SIGTERM, after saving a partial file to ``out_path``.
+        EnvelopeError: ``resume`` with a missing or incompatible partial file.
+    """
+    executor = executor or _SerialExecutor()
+    progress = progress or _NullProgress()
+    path = Path(out_path) if out_path is not None else None
+    metadata = _base_metadata(job, command, grid_spec)
+    state = _EnvelopeState(job)
+    if resume:
+        if path is None:
+            raise EnvelopeError("resume needs the output file of the interrupted computation")
+        previous = read_envelope_file(path, allow_partial=True)
+        _check_resumable(job, previous, path)
+        if previous.complete:
+            progress.message(f"{path}: already complete (envelope {previous.envelope_id}); nothing to do")
+            return previous
+        state = _EnvelopeState.from_envelope(job, previous)
+        progress.message(f"{path}: resuming ({len(state.solutions)} of {math.prod(state.shape)} nodes done)")
+
+    started = time.perf_counter()
+    last_checkpoint = [time.monotonic()]
+
+    def snapshot(complete: bool) -> Envelope:
+        wall = state.previous_wall_time_s + time.perf_counter() - started
+        compute = {
+            "wall_time_s": round(wall, 3),
+            "phases_s": {k: round(v, 3) for k, v in state.phase_seconds.items()},
+            "executor": executor.description,
+            "counters": dict(state.counters),
+            "nodes": math.prod(state.shape),
+            "boundary_points": len(state.boundary),
+            "finished_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds") if complete else None,
+        }
+        return state.to_envelope(dict(metadata, compute=compute), complete)
+
+    def checkpoint(force: bool = False) -> None:
+        if path is not None and (force or time.monotonic() - last_checkpoint[0] > CHECKPOINT_INTERVAL_S):
+            save_envelope(snapshot(complete=False), path)
+            last_checkpoint[0] = time.monotonic()
+
+    def run_phase(name: str, function, tasks: list[tuple], units: Callable[[Any], int], handle) -> None:
+        phase_started = time.perf_counter()
+        progress.start(name, sum(units(task) for task in tasks))
+        try:
+            for result in executor.map_unordered(function, tasks):
+                handle(result)
+                progress.advance(units(result))
+                guard.check()
+                checkpoint()
+        finally:
+            state.phase_seconds[name] = state.phase_seconds.get(name, 0.0) + time.perf_counter() - phase_started
+            progress.finish()
+
+    guard = _InterruptGuard()
+    try:
+        guard.__enter__()
+        guard.check()
+        rows = len(job.heights)
+        columns_left = [c for c in range(len(job.speeds)) if any((r, c) not in state.solutions for r in range(rows))]
+        run_phase(
+            "sweep", _sweep_column, [(job, column) for column in columns_left],
+            lambda item: rows, lambda result: state.set_column(result[1], result[2]),
+        )  # fmt: skip
+        while candidates := _recheck_candidates(state):
+            run_phase(
+                "cold re-check", _cold_check, [(job, row, column) for row, column in candidates],
+                lambda item: 1, lambda result: state.merge_cold(result[1], result[2]),
+            )  # fmt: skip
+        edges = [edge for edge in _boundary_edges(state) if edge not in state.boundary]
+        run_phase(
+            "boundary", _bisect_edge,
+            [(job, edge, state.solutions[edge[:2]], state.solutions[edge[2:]].value) for edge in edges],
+            lambda item: 1, lambda result: state.add_boundary(result[2]),
+        )  # fmt: skip
+    except KeyboardInterrupt:
+        executor.abort()
+        if path is not None:
+            save_envelope(snapshot(complete=False), path)
+        raise ComputeInterrupted(path) from None
+    finally:
+        guard.__exit__()
+    # Boundary points of edges that are no longer safe/not-safe pairs (resume after a change) are dropped.
+    current_edges = set(_boundary_edges(state))
+    state.boundary = {edge: point for edge, point in state.boundary.items() if edge in current_edges}
+    envelope = snapshot(complete=True)
+    if path is not None:
+        save_envelope(envelope, path)
+    return envelope
+
+
+# --- grids and sweeps -------------------------------------------------------------------------------------
+
+
+def parse_range(text: str, unit: float = 1.0, name: str = "range") -> tuple[float, ...]:
+    """Parses ``start:stop:count`` (inclusive, evenly spaced) into SI values (× ``unit``).
+
+    Raises:
+        ValueError: malformed text, count < 2, or stop <= start.
+    """
+    parts = text.split(":")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
+    except ValueError:
+        raise ValueError(f"{name} must be start:stop:count (e.g. 0:800:41), got {text!r}") from None
+    if not (math.isfinite(start) and math.isfinite(stop)) or count < 2 or stop <= start:
+        raise ValueError(f"{name} {text!r}: need finite start < stop and count >= 2")
+    return tuple(float(v) for v in np.linspace(start, stop, count) * unit)
+
+
+def parse_list(text: str, name: str = "list") -> list[float]:
+    """Parses a comma-separated list of numbers."""
+    try:
+        values = [float(item) for item in text.split(",") if item.strip()]
+    except ValueError:
+        raise ValueError(f"{name} must be comma-separated numbers, got {text!r}") from None
+    if not values or not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{name} must hold at least one finite number, got {text!r}")
+    return values
+
+
+def condition_file_name(airframe: Airframe, power_fraction: float) -> str:
+    """``<airframe>_<weight>lb_da<altitude>ft_pf<fraction>.npz``: one file per sweep combination."""
+    return (
+        f"{airframe.name}_{airframe.gross_weight / LBF:.0f}lb_da{airframe.density_altitude / FT:.0f}ft_"
+        f"pf{power_fraction:g}.npz"
+    )
