@@ -960,11 +960,21 @@ def test_path_speed_needs_increasing_stamps() -> None:
     assert path_section(path)["speed_ms"] is None
 
 
+def undirected(segments: list[tuple[float, ...]]) -> list[tuple[tuple[float, ...], ...]]:
+    """Segments as sorted pairs of end points (a segment has no direction)."""
+    return sorted(tuple(sorted((segment[:2], segment[2:]))) for segment in segments)
+
+
 def test_boundary_points_join_into_cell_segments() -> None:
     heights = np.array([0.0, 10.0, 20.0])
     speeds = np.array([0.0, 5.0, 10.0])
-    # a boundary crossing the lower-left cell from its left edge (h = 4 on v = 0) to its top edge (v = 3 on h = 10),
-    # then the upper-left cell's bottom edge (shared) to its right edge (h = 16 on v = 5)
-    points = np.array([[4.0, 0.0], [10.0, 3.0], [16.0, 5.0]])
-    segments = boundary_segments(heights, speeds, points)
-    assert sorted(segments) == sorted([(4.0, 0.0, 10.0, 3.0), (10.0, 3.0, 16.0, 5.0)])
+    safe = np.array([[False, True, True], [False, True, True], [True, True, True]])
+    # one point on each edge between a safe and an unsafe node, plus a node point that also lies on them
+    points = np.array([[0.0, 3.0], [10.0, 2.0], [14.0, 0.0], [10.0, 5.0]])
+    segments = boundary_segments(heights, speeds, safe, points)
+    assert undirected(segments) == undirected([(0.0, 3.0, 10.0, 2.0), (10.0, 2.0, 14.0, 0.0)])
+    # a saddle cell: the two safe corners are cut off, never joined
+    saddle = np.array([[True, False], [False, True]])
+    crossings = np.array([[0.0, 2.0], [5.0, 5.0], [10.0, 3.0], [4.0, 0.0]])
+    segments = boundary_segments(heights[:2], speeds[:2], saddle, crossings)
+    assert undirected(segments) == undirected([(0.0, 2.0, 4.0, 0.0), (5.0, 5.0, 10.0, 3.0)])

@@ -228,7 +228,8 @@ def envelope_section(envelope: Any) -> dict[str, Any]:
         "status": codes.tolist(),
         "boundary": [[_finite(height), _finite(speed)] for height, speed in boundary],
         "boundary_segments": [
-            [_finite(value) for value in segment] for segment in boundary_segments(heights, speeds, boundary)
+            [_finite(value) for value in segment]
+            for segment in boundary_segments(heights, speeds, codes == 0, boundary)
         ],
         "envelope_id": str(envelope.envelope_id),
         "airframe": str(getattr(envelope, "airframe_name", "") or ""),
@@ -237,53 +238,71 @@ def envelope_section(envelope: Any) -> dict[str, Any]:
     }
 
 
-def boundary_segments(heights: np.ndarray, speeds: np.ndarray, boundary: np.ndarray) -> list[tuple[float, ...]]:
+def boundary_segments(
+    heights: np.ndarray, speeds: np.ndarray, safe: np.ndarray, boundary: np.ndarray
+) -> list[tuple[float, ...]]:
     """Joins the envelope's boundary points into a curve, cell by cell (marching squares).
 
-    Each boundary point lies on a grid line between a safe and a not-safe node, so every grid cell holds 0, 2
-    or 4 of them on its edges: two are joined by a segment, four (a saddle) are paired around the cell.
-    Points off the grid lines are left out here (the page still draws every point).
+    A grid edge whose end nodes differ (safe / not safe) holds one refined boundary point (the last point
+    proven safe, possibly the safe node itself). Every cell has 0, 2 or 4 such edges: two crossings are
+    joined by a segment, four (a saddle) are paired around the cell. Edges without a point are skipped.
 
     Args:
-        heights: grid heights, m, ascending.
-        speeds: grid speeds, m/s, ascending.
+        heights: grid heights, m, ascending (H).
+        speeds: grid speeds, m/s, ascending (S).
+        safe: H × S booleans, True where the node is safe.
         boundary: B × 2 points (height m, speed m/s).
 
     Returns:
         Segments ``(height_1, speed_1, height_2, speed_2)`` in m and m/s.
     """
     heights, speeds = np.asarray(heights, dtype=float), np.asarray(speeds, dtype=float)
+    safe = np.asarray(safe, dtype=bool)
     tolerance_h = 1e-4 * float(np.min(np.diff(heights)))
     tolerance_v = 1e-4 * float(np.min(np.diff(speeds)))
-    last_row, last_column = heights.size - 2, speeds.size - 2
-    cells: dict[tuple[int, int], list[tuple[float, float]]] = {}
+    # edge ("h", row, column): height = heights[row], speed in [speeds[column], speeds[column + 1]];
+    # edge ("v", row, column): speed = speeds[column], height in [heights[row], heights[row + 1]]
+    on_edge: dict[tuple[str, int, int], list[tuple[float, float]]] = {}
     for height, speed in np.asarray(boundary, dtype=float).reshape(-1, 2):
         if not (math.isfinite(height) and math.isfinite(speed)):
             continue
-        on_row = np.flatnonzero(np.abs(heights - height) <= tolerance_h)
-        on_column = np.flatnonzero(np.abs(speeds - speed) <= tolerance_v)
-        if on_row.size:  # on a constant-height line: shared by the cells below and above it
-            row = int(on_row[0])
-            column = int(np.clip(np.searchsorted(speeds, speed, side="right") - 1, 0, last_column))
-            owners = ((row - 1, column), (row, column))
-        elif on_column.size:  # on a constant-speed line: shared by the cells left and right of it
-            column = int(on_column[0])
-            row = int(np.clip(np.searchsorted(heights, height, side="right") - 1, 0, last_row))
-            owners = ((row, column - 1), (row, column))
+        point = (float(height), float(speed))
+        spans_v = np.flatnonzero((speeds[:-1] - tolerance_v <= speed) & (speed <= speeds[1:] + tolerance_v))
+        spans_h = np.flatnonzero((heights[:-1] - tolerance_h <= height) & (height <= heights[1:] + tolerance_h))
+        for row in np.flatnonzero(np.abs(heights - height) <= tolerance_h):
+            for column in spans_v:
+                on_edge.setdefault(("h", int(row), int(column)), []).append(point)
+        for column in np.flatnonzero(np.abs(speeds - speed) <= tolerance_v):
+            for row in spans_h:
+                on_edge.setdefault(("v", int(row), int(column)), []).append(point)
+
+    def crossing(kind: str, row: int, column: int) -> tuple[float, float] | None:
+        candidates = on_edge.get((kind, row, column))
+        if not candidates:
+            return None
+        if kind == "h":
+            middle = (heights[row], 0.5 * (speeds[column] + speeds[column + 1]))
         else:
-            continue
-        for owner in owners:
-            if 0 <= owner[0] <= last_row and 0 <= owner[1] <= last_column:
-                cells.setdefault(owner, []).append((float(height), float(speed)))
+            middle = (0.5 * (heights[row] + heights[row + 1]), speeds[column])
+        # a node point sits on every edge at that node; the point inside the edge is the better one
+        return min(candidates, key=lambda p: abs(p[0] - middle[0]) / tolerance_h + abs(p[1] - middle[1]) / tolerance_v)
+
     segments: list[tuple[float, ...]] = []
-    for (row, column), points in sorted(cells.items()):
-        if len(points) == 2:
-            segments.append((*points[0], *points[1]))
-        elif len(points) == 4:  # saddle: join neighbours in angular order around the cell centre
-            centre_h, centre_v = heights[row : row + 2].mean(), speeds[column : column + 2].mean()
-            span_h, span_v = heights[row + 1] - heights[row], speeds[column + 1] - speeds[column]
-            points.sort(key=lambda p: math.atan2((p[0] - centre_h) / span_h, (p[1] - centre_v) / span_v))
-            segments += [(*points[0], *points[1]), (*points[2], *points[3])]
+    for row in range(heights.size - 1):
+        for column in range(speeds.size - 1):
+            edges = (
+                ("h", row, column, safe[row, column] != safe[row, column + 1]),
+                ("v", row, column + 1, safe[row, column + 1] != safe[row + 1, column + 1]),
+                ("h", row + 1, column, safe[row + 1, column] != safe[row + 1, column + 1]),
+                ("v", row, column, safe[row, column] != safe[row + 1, column]),
+            )  # counter-clockwise: bottom, right, top, left
+            points = [crossing(kind, r, c) for kind, r, c, changes in edges if changes]
+            points = [point for point in points if point is not None]
+            if len(points) == 2:
+                segments.append((*points[0], *points[1]))
+            elif len(points) == 4:  # saddle: cut off the safe corners (never join them across the cell)
+                first, second = ((0, 1), (2, 3)) if safe[row, column + 1] else ((1, 2), (3, 0))
+                segments += [(*points[first[0]], *points[first[1]]), (*points[second[0]], *points[second[1]])]
     return segments
 
 
