@@ -162,13 +162,9 @@ class StoredPlan:
 
     def controls_at(self, times) -> np.ndarray:
         """The planned (C_T, θ) at the given times, 2 × len(times) (held constant outside the plan)."""
-        from helireach_ros.transcription import DecodedPlan
         from helireach_ros.verification import control_function
 
-        empty = np.zeros((6, 0))
-        plan = DecodedPlan(self.time_to_land, empty[0], empty, self.control_times, self.control_values,
-                           self.control_interpolation)  # fmt: skip
-        return control_function(plan, times)
+        return control_function(self.control_times, self.control_values, self.control_interpolation, times)
 
 
 def _json_number(value: float) -> float | None:

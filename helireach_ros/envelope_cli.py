@@ -152,6 +152,8 @@ def _compute(arguments: argparse.Namespace) -> int:
         return 130
     except EnvelopeError as error:
         return _error(str(error))
+    except Exception as error:  # a worker or cluster failure: say what happened, keep the partial file
+        return _error(f"computation failed ({type(error).__name__}: {error}); a partial file (if any) can be resumed")
     finally:
         executor.close()
     return 0

@@ -8,10 +8,10 @@ whether a safe landing is reachable from there. The work runs in three phases:
    next node is warm-started from the previous node's plan if that plan was ``safe`` (a warm start
    from an unsafe plan could drag the next node into the same crash), otherwise cold.
 2. **Cold re-check.** Every warm-started node whose value is near 0 (``|J| < NEAR_ZERO_VALUE``) or
-   whose status differs from a 4-neighbour is solved again cold, and the more conservative of the
-   two answers is kept (status rank safe < unverified < failed < unsafe, then the larger value), so
-   a warm start never carries an optimistic answer across the boundary. Repeated until no such node
-   is left unchecked.
+   whose status differs from a 4-neighbour is solved again cold (:func:`_checked`): ``unsafe`` from
+   either start wins, otherwise the cold answer decides — such a node is ``safe`` only with a
+   verified cold plan, so a warm start never carries an optimistic answer across the boundary.
+   Repeated until no such node is left unchecked.
 3. **Boundary refinement.** On every grid line between a safe and an unsafe node, the boundary is
    located to within ``2 ft`` / ``1 kt`` by regula falsi on the value (bisection as a safeguard),
    each trial warm-started from the plan of the current safe end. The final safe end is confirmed
@@ -150,6 +150,24 @@ def _more_conservative(first: _Solution, second: _Solution) -> _Solution:
     return second if second.conservatism > first.conservatism else first
 
 
+def _checked(warm: _Solution, cold: _Solution) -> _Solution:
+    """Combines a warm-started answer with the cold answer for the same point.
+
+    An ``unsafe`` verdict from either start wins (the larger value if both); otherwise the cold
+    answer decides, so a point is ``safe`` only if the cold solve produced a verified plan — a warm
+    start can never make it safe. The one case where this keeps less than the strict "more
+    conservative of the two" is warm ``unverified``/``failed`` with cold ``safe``: both NLP answers
+    say a landing is reachable and the cold plan is independently verified, so ``safe`` is proven.
+    (Warm plans that ride the rotor-speed limit overshoot it between collocation points in the
+    replay more often than cold ones; the strict rule marked ~30 such proven-safe nodes unverified.)
+    """
+    if warm.status == _UNSAFE or cold.status == _UNSAFE:
+        return _more_conservative(cold, warm)
+    if cold.status == _SAFE:
+        return cold
+    return _more_conservative(cold, warm)
+
+
 def _warm_start_of(solution: _Solution):
     """The planner warm start stored in a solution (float32 → float64), or None without a plan."""
     from helireach_ros.planner import WarmStart
@@ -281,7 +299,7 @@ def _bisect_edge(
             solves += 1
             if answer.status == _SAFE and (confirm_each or safe_end[2] is None):
                 if safe_end[2] is not None:
-                    answer = _more_conservative(answer, _solve_point(job, *point(trial)))
+                    answer = _checked(answer, _solve_point(job, *point(trial)))
                     solves += 1
                     cold_solves += 1
                 if answer.status == _SAFE:
@@ -371,8 +389,8 @@ class _DaskExecutor:
         from distributed import as_completed
 
         self._futures = [self._client.submit(function, *arguments, pure=False) for arguments in tasks]
-        for _, result in as_completed(self._futures, with_results=True):
-            yield result
+        for future in as_completed(self._futures, loop=self._client.loop):
+            yield future.result()
         self._futures = []
 
     def abort(self) -> None:
@@ -550,7 +568,7 @@ class _EnvelopeState:
     def merge_cold(self, cell: tuple[int, int], cold: _Solution) -> None:
         current = self.solutions[cell]
         self.disagree[cell] = current.status != cold.status
-        self.solutions[cell] = _more_conservative(current, cold)
+        self.solutions[cell] = _checked(current, cold)
         self.cold_checked[cell] = True
         self.counters["cold_rechecks"] += 1
 
@@ -706,7 +724,12 @@ def _check_resumable(job: EnvelopeJob, envelope: Envelope, path: Path) -> None:
 
 
 def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
-    """Warm-solved nodes not yet checked cold whose value is near 0 or whose status differs from a neighbour."""
+    """Warm-solved nodes not yet checked cold whose value is near 0 or whose status differs from a neighbour.
+
+    Nodes whose own warm answer is not ``safe`` go first: when the cold solve turns such a lone
+    unverified node safe, its safe neighbours no longer differ from it and need no re-check. The
+    loop over rounds ends at the same condition either way: no unchecked node is near 0 or differs.
+    """
     codes, values = state.codes(), state.values()
     differs = np.zeros(state.shape, bool)
     vertical, horizontal = codes[:-1, :] != codes[1:, :], codes[:, :-1] != codes[:, 1:]
@@ -717,6 +740,9 @@ def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
     with np.errstate(invalid="ignore"):
         near_zero = np.abs(values) < NEAR_ZERO_VALUE
     candidates = (codes != PENDING) & ~state.cold_checked & (near_zero | differs)
+    not_safe_first = candidates & (codes != _SAFE)
+    if np.any(not_safe_first):
+        candidates = not_safe_first
     return [(int(r), int(c)) for r, c in zip(*np.nonzero(candidates), strict=True)]
 
 
@@ -841,6 +867,12 @@ def compute_envelope(
         if path is not None:
             save_envelope(snapshot(complete=False), path)
         raise ComputeInterrupted(path) from None
+    except Exception:
+        # e.g. a Dask worker without helireach_ros: keep what was computed, then report the error
+        executor.abort()
+        if path is not None and state.solutions:
+            save_envelope(snapshot(complete=False), path)
+        raise
     finally:
         guard.__exit__()
     # Boundary points of edges that are no longer safe/not-safe pairs (resume after a change) are dropped.

@@ -1,0 +1,114 @@
+"""The shipped uh60a_class total-power-loss envelope: it loads for today's airframe and settings, has the
+expected H-V shape, every safe node is verified, and a sample of nodes recomputes to the stored answers.
+
+If the airframe file or config/planner.yaml changes, the loading test fails on purpose: recompute the file
+with the command recorded in its metadata.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from helireach_ros.airframe import load_airframe
+from helireach_ros.envelope import default_envelope_path, load_envelope
+from helireach_ros.model import initial_state_after_failure
+from helireach_ros.planner import get_planner
+from helireach_ros.settings import load_settings
+from helireach_ros.units import FT, KT
+
+
+@pytest.fixture(scope="module")
+def airframe():
+    return load_airframe("uh60a_class")
+
+
+@pytest.fixture(scope="module")
+def settings():
+    return load_settings()
+
+
+@pytest.fixture(scope="module")
+def shipped(airframe, settings):
+    return load_envelope(default_envelope_path(), airframe=airframe, settings=settings, power_fraction=0.0)
+
+
+def test_shipped_file_is_small_and_made_by_the_cli(shipped):
+    assert default_envelope_path().stat().st_size <= 10 * 1024 * 1024
+    command = shipped.metadata["command"]
+    assert command.startswith("helireach envelope compute") and "--airframe uh60a_class" in command
+    assert shipped.complete
+    assert shipped.status.shape == (41, 25)
+    assert np.allclose(shipped.heights[[0, -1]] / FT, [0, 800]) and np.allclose(shipped.speeds[[0, -1]] / KT, [0, 120])
+
+
+def test_every_safe_node_is_verified_and_values_match_statuses(shipped):
+    safe = shipped.status == "safe"
+    assert np.all(shipped.arrays["verified"][safe])
+    assert np.all(shipped.value[safe] <= 0.0)
+    assert np.all(shipped.value[shipped.status == "unsafe"] > 0.0)
+    assert not np.any(shipped.status == "failed")
+
+
+def test_hover_has_a_low_speed_unsafe_band_between_tens_and_hundreds_of_feet(shipped):
+    heights_ft = shipped.heights / FT
+    hover = shipped.status[:, 0]
+    unsafe_rows = np.flatnonzero(hover == "unsafe")
+    assert unsafe_rows.size > 0
+    assert np.array_equal(unsafe_rows, np.arange(unsafe_rows[0], unsafe_rows[-1] + 1))  # one contiguous band
+    bottom_ft, top_ft = heights_ft[unsafe_rows[0]], heights_ft[unsafe_rows[-1]]
+    assert 10 <= bottom_ft <= 100
+    assert 150 <= top_ft <= 600
+    assert np.all(hover[unsafe_rows[-1] + 1 :] == "safe")  # safe above the band
+    # the refined boundary at hover brackets the band from below and above
+    at_hover = np.sort(shipped.boundary[shipped.boundary[:, 1] == 0.0][:, 0] / FT)
+    assert len(at_hover) == 2
+    assert heights_ft[unsafe_rows[0] - 1] <= at_hover[0] < bottom_ft
+    assert top_ft < at_hover[1] <= heights_ft[unsafe_rows[-1] + 1]
+
+
+def test_safe_at_high_speed_and_above_the_band(shipped):
+    heights_ft, speeds_kt = shipped.heights / FT, shipped.speeds / KT
+    fast = shipped.status[:, speeds_kt >= 90]
+    high = shipped.status[heights_ft >= 500, :]
+    for region in (fast, high):
+        assert not np.any(region == "unsafe")
+        assert np.mean(region == "safe") >= 0.97  # the rest: an unverified replay, never claimed safe
+    # the unsafe set narrows with speed: the largest unsafe height falls as speed rises
+    top = [heights_ft[np.flatnonzero(column == "unsafe")].max(initial=-1) for column in shipped.status.T]
+    assert all(later <= earlier for earlier, later in itertools.pairwise(top))
+
+
+def test_queries_on_the_shipped_envelope(shipped):
+    inside_band = shipped.query(200 * FT, 5 * KT)
+    assert inside_band.status == "unsafe" and inside_band.margin < 0
+    cruise = shipped.query(700 * FT, 100 * KT)
+    assert cruise.status == "safe" and cruise.margin > 100  # hundreds of ft/kt from the hover band
+    assert shipped.query(900 * FT, 50 * KT).status == "outside"
+
+
+def test_a_sample_of_nodes_recomputes_to_the_stored_answers(shipped, airframe, settings):
+    """Cold-solved nodes recompute cold; warm-solved nodes recompute from the stored plan below them."""
+    planner = get_planner(airframe, settings)
+    arrays = shipped.arrays
+    warm, checked = arrays["warm_started"], arrays["cold_checked"]
+    cold_nodes = [
+        (10, 0),  # 200 ft, hover: inside the band
+        *[tuple(int(i) for i in node) for node in np.argwhere(checked & ~warm & (shipped.status == "safe"))[:2]],
+    ]
+    # warm nodes whose predecessor's stored plan is still the one the sweep used (it was not re-solved cold)
+    plain_warm = np.argwhere(warm & ~checked)
+    warm_nodes = [
+        (int(row), int(column))
+        for row, column in plain_warm
+        if row > 0 and warm[row - 1, column] and not checked[row - 1, column]
+    ]
+    warm_nodes = [warm_nodes[0], warm_nodes[len(warm_nodes) // 2]]
+    for row, column in cold_nodes + warm_nodes:
+        state = initial_state_after_failure(airframe, shipped.heights[row], shipped.speeds[column])
+        start = shipped.stored_plan(row - 1, column).warm_start if (row, column) in warm_nodes else None
+        plan = planner.plan(state, warm_start=start)
+        assert plan.status == shipped.status[row, column], (row, column)
+        assert plan.value == pytest.approx(shipped.value[row, column], abs=1e-4), (row, column)
