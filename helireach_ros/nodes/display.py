@@ -91,7 +91,7 @@ COLLECTIVE_JOINT = "collective_thrust_coefficient"
 PITCH_JOINT = "pitch_angle"
 
 # Keys of the DiagnosticStatus values (first match wins; the status/planner nodes own the names, see msg_docs/).
-_MARGIN_KEYS = ("margin", "margin_ft_kt")
+_MARGIN_KEYS = ("margin_ft_kt", "margin")
 _ENVELOPE_ID_KEYS = ("envelope_id",)
 _PLAN_VERIFIED_KEYS = ("verified",)
 _PLAN_FALLBACK_KEYS = ("fallback", "is_fallback")
@@ -601,6 +601,7 @@ class CockpitDisplay(Node):
     Parameters (ROS): ``port`` (8080; 0 = any free port, see :attr:`url`), ``bind`` (127.0.0.1; another address
     only when given), ``envelope_file`` (default: the shipped envelope), ``airframe`` (rotor limits; default: the
     envelope's airframe), ``state_topic`` (``/helireach/state``; ``/vehicle/odometry`` has the same layout),
+    ``rotor_topic`` (``/vehicle/rotor``; the monitor's ``/helireach/rotor_state`` has the same layout),
     ``stale_after_s`` (NO DATA after this long without a safety status), ``max_update_rate_hz`` (frames per
     second per page).
 
@@ -617,6 +618,7 @@ class CockpitDisplay(Node):
         self._envelope_file = self._declare("envelope_file", "", "H-V envelope file ('' = the shipped envelope)")
         self._airframe_name = self._declare("airframe", "", "airframe for rotor limits ('' = the envelope's)")
         state_topic = self._declare("state_topic", "/helireach/state", "nav_msgs/Odometry vehicle state topic")
+        rotor_topic = self._declare("rotor_topic", ROTOR_TOPIC, "sensor_msgs/JointState rotor speed topic")
         self._stale_after_s = self._declare(
             "stale_after_s", 2.0, "NO DATA after this long without a message", floating=(0.1, 3600.0), read_only=False
         )
@@ -641,15 +643,16 @@ class CockpitDisplay(Node):
         )
         # BEST_EFFORT matches reliable and best-effort publishers; depth 1: only the newest sample matters
         sensor = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-        plan = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.RELIABLE)
+        event = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        # the safety status and the plan are latched (msg_docs): a page opened after the failure shows the plan
         for message_type, topic, callback, qos in (
             (DiagnosticStatus, SAFETY_STATUS_TOPIC, self._on_safety_status, latched),
             (Odometry, state_topic, self._on_state, sensor),
-            (JointState, ROTOR_TOPIC, self._on_rotor, sensor),
-            (Header, FAILURE_EVENT_TOPIC, self._on_failure, plan),
-            (JointTrajectory, TRAJECTORY_TOPIC, self._on_trajectory, plan),
-            (PathMsg, PATH_TOPIC, self._on_path, plan),
-            (DiagnosticStatus, PLAN_STATUS_TOPIC, self._on_plan_status, plan),
+            (JointState, rotor_topic, self._on_rotor, sensor),
+            (Header, FAILURE_EVENT_TOPIC, self._on_failure, event),
+            (JointTrajectory, TRAJECTORY_TOPIC, self._on_trajectory, latched),
+            (PathMsg, PATH_TOPIC, self._on_path, latched),
+            (DiagnosticStatus, PLAN_STATUS_TOPIC, self._on_plan_status, latched),
         ):
             self.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
 
