@@ -278,7 +278,7 @@ def status_message(
         values=[
             KeyValue(key="height_m", value=f"{height_m:.3f}"),
             KeyValue(key="forward_speed_m_s", value=f"{speed_ms:.3f}"),
-            KeyValue(key="margin", value=f"{margin:.3f}"),
+            KeyValue(key="margin_ft_kt", value=repr(float(margin))),
             KeyValue(key="envelope_id", value=envelope_id),
         ],
     )
@@ -297,9 +297,10 @@ class VehicleAndStatus(Node):
         self.rotor_publisher = self.create_publisher(JointState, "/vehicle/rotor", 10)
         self.status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/safety_status", LATCHED)
         self.failure_publisher = self.create_publisher(Header, "/helireach/failure_event", RELIABLE)
-        self.trajectory_publisher = self.create_publisher(JointTrajectory, "/helireach/landing_trajectory", RELIABLE)
-        self.path_publisher = self.create_publisher(PathMsg, "/helireach/landing_path", RELIABLE)
-        self.plan_status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/plan_status", RELIABLE)
+        # the planner's topics are latched (msg_docs)
+        self.trajectory_publisher = self.create_publisher(JointTrajectory, "/helireach/landing_trajectory", LATCHED)
+        self.path_publisher = self.create_publisher(PathMsg, "/helireach/landing_path", LATCHED)
+        self.plan_status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/plan_status", LATCHED)
         self.create_timer(1.0 / 60.0, self._publish_vehicle)
         self.create_timer(0.1, self._publish_status)
 
@@ -310,15 +311,20 @@ class VehicleAndStatus(Node):
     def _publish_vehicle(self) -> None:
         with self._lock:
             state, rotor_speed = self.state, self.rotor_speed
+        stamp = self.get_clock().now().to_msg()
         if state is not None:
             message = Odometry()
+            message.header.stamp = stamp
             message.header.frame_id = "odom"
+            message.child_frame_id = "base_stabilized"
             message.pose.pose.position.z = state[0]
             message.twist.twist.linear.x = state[1]
             message.twist.twist.linear.z = state[2]
             self.state_publisher.publish(message)
         if rotor_speed is not None:
-            self.rotor_publisher.publish(JointState(name=["main_rotor"], velocity=[rotor_speed]))
+            rotor = JointState(name=["main_rotor"], velocity=[rotor_speed])
+            rotor.header.stamp = stamp
+            self.rotor_publisher.publish(rotor)
 
     def _publish_status(self) -> None:
         with self._lock:
@@ -330,20 +336,27 @@ class VehicleAndStatus(Node):
 class RosHarness:
     """A fresh context, the display node and the test publisher, spun on a background thread."""
 
-    def __init__(self, **display_parameters: Any) -> None:
+    def __init__(self, vehicle_topic: str = "/helireach/state", **display_parameters: Any) -> None:
         self.context = Context()
         rclpy.init(context=self.context)
         parameters = {"port": 0, "stale_after_s": STALE_AFTER_S, **display_parameters}
         self.display = CockpitDisplay(
             context=self.context, parameter_overrides=[Parameter(k, value=v) for k, v in parameters.items()]
         )
-        self.vehicle = VehicleAndStatus(self.context)
+        self.vehicle = VehicleAndStatus(self.context, vehicle_topic)
+        self.others: list[Node] = []
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.display)
         self.executor.add_node(self.vehicle)
         self._thread = threading.Thread(target=self.executor.spin, daemon=True)
         self._thread.start()
         self.destroyed = False
+
+    def add(self, node: Node) -> Node:
+        """Spins another node (e.g. the real status node) beside the display."""
+        self.others.append(node)
+        self.executor.add_node(node)
+        return node
 
     def destroy_display(self) -> None:
         if not self.destroyed:
@@ -355,7 +368,8 @@ class RosHarness:
         self.executor.shutdown(timeout_sec=5.0)
         self._thread.join(timeout=5.0)
         self.destroy_display()
-        self.vehicle.destroy_node()
+        for node in [self.vehicle, *self.others]:
+            node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 
 
@@ -870,6 +884,37 @@ def test_bad_messages_never_break_the_page(envelope_file: Path) -> None:
 
                 vehicle.set((100.0, 30.0, 0.0), status_message(DiagnosticStatus.ERROR, "unsafe", 100, 30, -4, "x"))
                 await frame_until(socket, lambda f: live_level(f) == "avoid", "the node still working")
+
+        asyncio.run(scenario())
+    finally:
+        harness.close()
+
+
+def test_a_display_started_after_the_failure_shows_the_latched_plan(envelope_file: Path, real_plan: Any) -> None:
+    harness = RosHarness(envelope_file=str(envelope_file))
+    try:
+        trajectory, path, plan_status = plan_messages(real_plan, harness.vehicle.get_clock().now().to_msg())
+        harness.vehicle.trajectory_publisher.publish(trajectory)
+        harness.vehicle.path_publisher.publish(path)
+        harness.vehicle.plan_status_publisher.publish(plan_status)
+        late = harness.add(
+            CockpitDisplay(
+                context=harness.context,
+                parameter_overrides=[Parameter("port", value=0), Parameter("envelope_file", value=str(envelope_file))],
+            )
+        )
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(late)) as socket:
+                frame = await frame_until(
+                    socket,
+                    lambda f: bool(f.get("plan") and all(f["plan"][part] for part in ("trajectory", "path", "status"))),
+                    "the whole plan",
+                )
+                plan = frame["plan"]
+                assert len(plan["trajectory"]["t_s"]) == len(trajectory.points)
+                assert len(plan["path"]["speed_ms"]) == len(real_plan.times)
+                assert plan["status"]["time_to_land_s"] == pytest.approx(real_plan.time_to_land, abs=1e-3)
 
         asyncio.run(scenario())
     finally:
