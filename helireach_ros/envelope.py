@@ -191,6 +191,10 @@ def _canonical_json(metadata: dict[str, Any]) -> bytes:
     return json.dumps(metadata, sort_keys=True, separators=(",", ":"), allow_nan=False).encode()
 
 
+def _array_property(name: str, doc: str) -> property:
+    return property(lambda self: self._arrays[name], doc=doc)
+
+
 class Envelope:
     """An immutable H-V envelope (see the module docstring for the semantics).
 
@@ -253,29 +257,15 @@ class Envelope:
             raise EnvelopeError(f"metadata format is {self._metadata.get('format')!r}, expected {FORMAT_NAME!r}")
 
     # --- the contract's attributes -------------------------------------------------------------
-    @property
-    def heights(self) -> np.ndarray:
-        return self._arrays["heights"]
-
-    @property
-    def speeds(self) -> np.ndarray:
-        return self._arrays["speeds"]
+    heights = _array_property("heights", "Grid heights above ground, m, ascending (axis 0).")
+    speeds = _array_property("speeds", "Grid forward speeds, m/s, ascending (axis 1).")
+    value = _array_property("value", "H × S optimal values (NaN where the solver failed).")
+    time_to_land = _array_property("time_to_land", "H × S landing times of the stored plans, s.")
+    boundary = _array_property("boundary", "B × 2 refined boundary points (height m, speed m/s), the safe side.")
 
     @property
     def status(self) -> np.ndarray:
         return self._status
-
-    @property
-    def value(self) -> np.ndarray:
-        return self._arrays["value"]
-
-    @property
-    def time_to_land(self) -> np.ndarray:
-        return self._arrays["time_to_land"]
-
-    @property
-    def boundary(self) -> np.ndarray:
-        return self._arrays["boundary"]
 
     @property
     def metadata(self) -> dict[str, Any]:

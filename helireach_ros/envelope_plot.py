@@ -10,14 +10,15 @@ own markers. An optional flown track (height m, speed m/s) is drawn on top.
 from __future__ import annotations
 
 import os
-from pathlib import Path
+import pathlib
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.collections import LineCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Patch
+from matplotlib.patches import Patch, PathPatch
+from matplotlib.path import Path
 
 from helireach_ros.envelope import STATUS_CODES, Envelope
 from helireach_ros.units import FT, KT, LBF
@@ -42,10 +43,13 @@ def _crossings(envelope: Envelope) -> dict[tuple[int, int, int, int], tuple[floa
 
 
 def boundary_geometry(envelope: Envelope) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """Polygons of the not-proven-safe region and segments of the boundary curve, in (kt, ft).
+    """Polygons of the not-proven-safe region and segments of the refined boundary curve, in (kt, ft).
+
+    A cell edge between a safe and a not-safe node is cut at its refined boundary point, or at its
+    middle when it has none (next to an unverified or failed node); the curve joins refined points only.
 
     Returns:
-        (polygons, segments): each polygon an n × 2 array, each segment a 2 × 2 array.
+        (polygons, segments): each polygon an n × 2 array (counter-clockwise), each segment a 2 × 2 array.
     """
     safe = envelope.arrays["status_code"] == STATUS_CODES["safe"]
     speeds_kt, heights_ft = envelope.speeds / KT, envelope.heights / FT
@@ -58,7 +62,7 @@ def boundary_geometry(envelope: Envelope) -> tuple[list[np.ndarray], list[np.nda
             bad = [not safe[corner] for corner in corners]
             if not any(bad):
                 continue
-            vertices: list[tuple[tuple[float, float], bool]] = []  # (point, is a crossing)
+            vertices: list[tuple[tuple[float, float], bool]] = []  # (point, is a refined crossing)
             for k, corner in enumerate(corners):
                 following = corners[(k + 1) % 4]
                 if bad[k]:
@@ -68,7 +72,8 @@ def boundary_geometry(envelope: Envelope) -> tuple[list[np.ndarray], list[np.nda
                         0.5 * (speeds_kt[corner[1]] + speeds_kt[following[1]]),
                         0.5 * (heights_ft[corner[0]] + heights_ft[following[0]]),
                     )
-                    vertices.append((refined.get((*corner, *following), midpoint), True))
+                    point = refined.get((*corner, *following))
+                    vertices.append((midpoint, False) if point is None else (point, True))
             polygons.append(np.array([point for point, _ in vertices]))
             for k, (point, is_crossing) in enumerate(vertices):
                 following_point, following_is_crossing = vertices[(k + 1) % len(vertices)]
@@ -86,7 +91,7 @@ def plot_envelope(
     out_path: str | os.PathLike[str],
     track: np.ndarray | None = None,
     title_extra: str | None = None,
-) -> Path:
+) -> pathlib.Path:
     """Draws the H-V diagram and writes it (format from the extension: .png, .svg, .pdf).
 
     Args:
@@ -106,9 +111,9 @@ def plot_envelope(
     axes = figure.add_subplot(1, 1, 1)
     speeds_kt, heights_ft = envelope.speeds / KT, envelope.heights / FT
     polygons, segments = boundary_geometry(envelope)
-    axes.add_collection(
-        PolyCollection(polygons, facecolors=_UNSAFE_COLOUR, edgecolors="none", alpha=0.35, antialiaseds=False)
-    )
+    if polygons:  # one compound path, filled once: no darker seams where cells meet
+        region = Path.make_compound_path(*(Path(np.vstack([p, p[:1]]), closed=True) for p in polygons))
+        axes.add_patch(PathPatch(region, facecolor=_UNSAFE_COLOUR, edgecolor="none", alpha=0.35))
     axes.add_collection(LineCollection(segments, colors="black", linewidths=1.8))
     handles: list = [
         Patch(facecolor=_UNSAFE_COLOUR, alpha=0.35, label="avoid: safe landing not proven"),
@@ -141,7 +146,7 @@ def plot_envelope(
     axes.set_xlabel("forward speed (kt)")
     axes.set_ylabel("height above ground (ft)")
     axes.grid(True, color="0.85", linewidth=0.6)
-    figure.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    figure.legend(handles=handles, loc="lower center", bbox_to_anchor=(0.5, 0.025), ncol=3, fontsize=8, frameon=False)
     airframe = envelope.metadata.get("airframe", {})
     weight_lbf = float(airframe.get("gross_weight", float("nan"))) / LBF
     altitude_ft = float(airframe.get("density_altitude", float("nan"))) / FT
@@ -158,8 +163,8 @@ def plot_envelope(
         f"{heights_ft.size} x {speeds_kt.size} nodes · level trim at failure",
         fontsize=7, color="0.4",
     )  # fmt: skip
-    figure.tight_layout(rect=(0, 0.09, 1, 1))
-    path = Path(out_path)
+    figure.tight_layout(rect=(0, 0.11, 1, 1))
+    path = pathlib.Path(out_path)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(path)
     return path

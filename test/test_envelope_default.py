@@ -21,18 +21,11 @@ from helireach_ros.units import FT, KT
 
 
 @pytest.fixture(scope="module")
-def airframe():
-    return load_airframe("uh60a_class")
-
-
-@pytest.fixture(scope="module")
-def settings():
-    return load_settings()
-
-
-@pytest.fixture(scope="module")
-def shipped(airframe, settings):
-    return load_envelope(default_envelope_path(), airframe=airframe, settings=settings, power_fraction=0.0)
+def shipped():
+    """The shipped file, loaded with today's airframe and planner settings (a mismatch fails here)."""
+    return load_envelope(
+        default_envelope_path(), airframe=load_airframe("uh60a_class"), settings=load_settings(), power_fraction=0.0
+    )
 
 
 def test_shipped_file_is_small_and_made_by_the_cli(shipped):
@@ -89,9 +82,10 @@ def test_queries_on_the_shipped_envelope(shipped):
     assert shipped.query(900 * FT, 50 * KT).status == "outside"
 
 
-def test_a_sample_of_nodes_recomputes_to_the_stored_answers(shipped, airframe, settings):
+def test_a_sample_of_nodes_recomputes_to_the_stored_answers(shipped):
     """Cold-solved nodes recompute cold; warm-solved nodes recompute from the stored plan below them."""
-    planner = get_planner(airframe, settings)
+    airframe = load_airframe("uh60a_class")
+    planner = get_planner(airframe, load_settings())
     arrays = shipped.arrays
     warm, checked = arrays["warm_started"], arrays["cold_checked"]
     cold_nodes = [
