@@ -307,7 +307,10 @@ class Envelope:
         Args:
             height_m: height above ground, m.
             speed_ms: forward speed, m/s.
+
+        Anything that is not a finite number (NaN, inf, None, text) is ``outside``.
         """
+        height_m, speed_ms = _as_float(height_m), _as_float(speed_ms)
         rows = _enclosing_nodes(self.heights, height_m)
         columns = _enclosing_nodes(self.speeds, speed_ms)
         if rows is None or columns is None:
@@ -332,6 +335,7 @@ class Envelope:
 
         Returns None for a non-finite query or when no node has a usable plan.
         """
+        height_m, speed_ms = _as_float(height_m), _as_float(speed_ms)
         if not (math.isfinite(height_m) and math.isfinite(speed_ms)):
             return None
         codes = self._arrays["status_code"]
@@ -424,6 +428,13 @@ def _describe_conditions(airframe: dict[str, Any]) -> str:
         )
     except (KeyError, TypeError, ValueError):
         return "conditions unknown"
+
+
+def _as_float(value: Any) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return math.nan
 
 
 def _enclosing_nodes(axis: np.ndarray, x: float, tolerance: float = 1e-9) -> list[int] | None:

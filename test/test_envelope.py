@@ -299,6 +299,9 @@ def test_query_outside_the_grid(one_unsafe_node):
         answer = query(one_unsafe_node, height_ft, speed_kt)
         assert answer.status == "outside"
         assert math.isnan(answer.margin) and math.isnan(answer.value)
+    assert one_unsafe_node.query(None, 1.0).status == "outside"
+    assert one_unsafe_node.query("high", 1.0).status == "outside"
+    assert one_unsafe_node.nearest_plan(None, 1.0) is None
     assert query(one_unsafe_node, 200, 20).status == "safe"  # the grid's corner is inside
 
 
@@ -414,6 +417,24 @@ def test_sweep_over_weights_writes_one_file_per_combination(airframe, tmp_path):
     assert load_envelope(files[0], airframe=lighter).status.shape == (2, 2)
     with pytest.raises(EnvelopeError):
         load_envelope(files[1], airframe=lighter)
+
+
+def test_progress_draws_a_bar_on_a_terminal_and_lines_otherwise():
+    from helireach_ros.envelope_compute import Progress, make_executor
+
+    terminal, log = io.StringIO(), io.StringIO()
+    for stream, interactive in ((terminal, True), (log, False)):
+        progress = Progress(stream, interactive=interactive)
+        progress.start("sweep", 20)
+        for _ in range(20):
+            progress.advance()
+        progress.finish()
+    assert "\r" in terminal.getvalue() and "[" + "#" * 30 + "] 20/20" in terminal.getvalue()
+    lines = log.getvalue().splitlines()
+    assert "\r" not in log.getvalue() and lines[-1].startswith("sweep: 20/20 (100 %)")
+    assert 2 <= len(lines) <= 12  # about every 10 %, not every node
+    with pytest.raises(ValueError):
+        make_executor(workers=0)
 
 
 def test_range_and_list_parsing():
