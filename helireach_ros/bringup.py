@@ -1,0 +1,240 @@
+"""Bringup: the helireach nodes composed in one process under a multi-threaded executor.
+
+There is no ``ros2 launch`` with the PyPI wheels; this is the ros2/examples ``composed.py`` pattern.
+:func:`build_system` initialises a context with ``config/nodes.yaml`` (then the user's parameter
+files, which win), creates the monitor, envelope status and planner nodes, optionally the simulated
+vehicle and any extra nodes (e.g. the cockpit display), and last the MCAP recorder, whose metadata
+names the airframe, envelope, software version and scenario. The planner's solver has its own
+callback group; the executor has at least four threads so a solve never starves the others.
+
+``helireach bringup [--params-file F] [--with-sim]`` (:func:`run_bringup`) spins until Ctrl-C or
+SIGTERM and then finishes the log. Each node also has its own console script for multi-process use.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import rclpy
+from rclpy.context import Context
+from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
+
+from helireach_ros import __version__
+from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
+from helireach_ros.nodes.monitor import VehicleMonitor
+from helireach_ros.nodes.planner_node import LandingPlannerNode
+from helireach_ros.nodes.recorder import McapRecorder
+from helireach_ros.nodes.sim_vehicle import SimVehicleNode
+from helireach_ros.resources import config_path
+
+__all__ = [
+    "DEFAULT_PARAMETERS",
+    "MIN_EXECUTOR_THREADS",
+    "HelireachSystem",
+    "build_system",
+    "ros_arguments",
+    "run_bringup",
+]
+
+DEFAULT_PARAMETERS = "nodes.yaml"
+"""The node parameter file in ``config/``, loaded before the user's."""
+MIN_EXECUTOR_THREADS = 4
+
+
+def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args: Sequence[str] = ()) -> list[str]:
+    """Command-line arguments for ``rclpy.init``: the default parameters, then the user's (last wins)."""
+    arguments = ["helireach", "--ros-args", "--params-file", str(config_path(DEFAULT_PARAMETERS))]
+    for path in params_files:
+        if not Path(path).is_file():
+            raise FileNotFoundError(f"parameter file {str(path)!r} not found")
+        arguments += ["--params-file", str(path)]
+    return [*arguments, *ros_args, "--"]
+
+
+@dataclass
+class HelireachSystem:
+    """The composed nodes, their executor and context."""
+
+    context: Context
+    executor: MultiThreadedExecutor
+    monitor: VehicleMonitor
+    envelope_status: EnvelopeStatusNode
+    planner: LandingPlannerNode
+    sim: SimVehicleNode | None = None
+    recorder: McapRecorder | None = None
+    extra: list[Node] = field(default_factory=list)
+    _closed: bool = False
+
+    @property
+    def nodes(self) -> list[Node]:
+        """Every node, the recorder last."""
+        nodes: list[Node] = [self.monitor, self.envelope_status, self.planner]
+        nodes += [self.sim] if self.sim is not None else []
+        nodes += self.extra
+        nodes += [self.recorder] if self.recorder is not None else []
+        return nodes
+
+    @property
+    def log_path(self) -> Path | None:
+        """The MCAP log being written (None without a recorder)."""
+        return self.recorder.log_path if self.recorder is not None else None
+
+    def spin_until(self, condition: Callable[[], bool], timeout_s: float, step_s: float = 0.05) -> bool:
+        """Spins the executor until ``condition()`` holds or the timeout passes; returns the condition."""
+        deadline = time.monotonic() + timeout_s
+        while self.context.ok() and not condition():
+            remaining = deadline - time.monotonic()
+            if remaining <= 0.0:
+                break
+            self.executor.spin_once(timeout_sec=min(step_s, remaining))
+        return condition()
+
+    def spin(self) -> None:
+        """Spins until the context shuts down (Ctrl-C/SIGTERM with the default context)."""
+        self.executor.spin()
+
+    def shutdown(self) -> None:
+        """Finishes the log, destroys the nodes, shuts the executor and context down; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if self.recorder is not None:
+            self.recorder.close()  # first: the file is complete whatever happens next
+        self.executor.shutdown(timeout_sec=5.0)
+        for node in self.nodes:
+            node.destroy_node()
+        if self.context.ok():
+            rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self) -> HelireachSystem:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.shutdown()
+
+
+def _recorder_metadata(system_nodes: Mapping[str, Node | None], command: str) -> dict[str, str]:
+    planner = system_nodes["planner"]
+    status = system_nodes["envelope_status"]
+    sim = system_nodes.get("sim")
+    metadata = {
+        "software_version": __version__,
+        "command": command,
+        "airframe": getattr(getattr(planner, "airframe", None), "name", "unknown"),
+        "airframe_digest": planner.airframe.digest() if getattr(planner, "planner", None) is not None else "",
+        "envelope_id": status.envelope.envelope_id if status.envelope is not None else "",
+        "planner_settings": json.dumps(dataclasses.asdict(planner.settings), sort_keys=True)
+        if getattr(planner, "planner", None) is not None
+        else "",
+    }
+    if sim is not None:
+        metadata["scenario"] = sim.scenario.name
+        metadata["scenario_json"] = json.dumps(sim.scenario.as_dict(), sort_keys=True)
+    return metadata
+
+
+def build_system(
+    params_files: Sequence[str | os.PathLike[str]] = (),
+    with_sim: bool = False,
+    record: bool = True,
+    log_dir: str | os.PathLike[str] | None = None,
+    scenario: str | None = None,
+    extra_nodes: Sequence[Callable[..., Node]] = (),
+    context: Context | None = None,
+    ros_args: Sequence[str] = (),
+    handle_signals: bool = False,
+    num_threads: int | None = None,
+    command: str = "helireach bringup",
+) -> HelireachSystem:
+    """Creates the composed system (not yet spinning).
+
+    Args:
+        params_files: parameter YAML files applied after ``config/nodes.yaml``.
+        with_sim: add the simulated vehicle.
+        record: add the MCAP recorder.
+        log_dir: the recorder's folder (overrides the parameter files).
+        scenario: the simulated vehicle's scenario (overrides the parameter files).
+        extra_nodes: factories called with the node options (``context=...``), e.g. the display class.
+        context: a fresh context to initialise (default: a new one).
+        ros_args: further ROS arguments (e.g. ``["-p", "helireach_planner:deadline:=0.1"]``).
+        handle_signals: install rclpy's SIGINT/SIGTERM handlers (the CLI does; tests do not).
+        num_threads: executor threads (default: max(4, CPUs)).
+        command: recorded in the log's metadata.
+    """
+    context = context if context is not None else Context()
+    options = SignalHandlerOptions.ALL if handle_signals else SignalHandlerOptions.NO
+    rclpy.init(args=ros_arguments(params_files, ros_args), context=context, signal_handler_options=options)
+    created: list[Node] = []
+    try:
+        monitor = VehicleMonitor(context=context)
+        created.append(monitor)
+        envelope_status = EnvelopeStatusNode(context=context)
+        created.append(envelope_status)
+        planner = LandingPlannerNode(context=context)
+        created.append(planner)
+        sim = None
+        if with_sim:
+            overrides = [Parameter("scenario", value=scenario)] if scenario else []
+            sim = SimVehicleNode(context=context, parameter_overrides=overrides)
+            created.append(sim)
+        extra = []
+        for factory in extra_nodes:
+            extra.append(factory(context=context))
+            created.append(extra[-1])
+        recorder = None
+        if record:
+            metadata = _recorder_metadata({"planner": planner, "envelope_status": envelope_status, "sim": sim}, command)
+            overrides = [Parameter("log_dir", value=str(log_dir))] if log_dir is not None else []
+            recorder = McapRecorder(metadata=metadata, context=context, parameter_overrides=overrides)
+            created.append(recorder)
+    except BaseException:
+        for node in reversed(created):
+            node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        raise
+    threads = num_threads if num_threads is not None else max(MIN_EXECUTOR_THREADS, os.cpu_count() or 1)
+    executor = MultiThreadedExecutor(num_threads=threads, context=context)
+    system = HelireachSystem(context, executor, monitor, envelope_status, planner, sim, recorder, extra)
+    for node in system.nodes:
+        executor.add_node(node)
+    return system
+
+
+def run_bringup(
+    params_files: Sequence[str | os.PathLike[str]] = (),
+    with_sim: bool = False,
+    log_dir: str | os.PathLike[str] | None = None,
+    scenario: str | None = None,
+    record: bool = True,
+    extra_nodes: Sequence[Callable[..., Node]] = (),
+) -> int:
+    """``helireach bringup``: runs the system until Ctrl-C or SIGTERM; returns the exit code."""
+    system = build_system(
+        params_files,
+        with_sim=with_sim,
+        record=record,
+        log_dir=log_dir,
+        scenario=scenario,
+        extra_nodes=extra_nodes,
+        handle_signals=True,
+    )
+    if system.log_path is not None:
+        print(f"helireach bringup: logging to {system.log_path}", flush=True)
+    try:
+        system.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        system.shutdown()
+    if system.log_path is not None:
+        print(f"helireach bringup: log written to {system.log_path}", flush=True)
+    return 0

@@ -1,0 +1,601 @@
+"""Planner node: on an engine failure, plan the landing, publish it, and keep re-planning down to the ground.
+
+Startup builds the NLP once (:func:`~helireach_ros.planner.get_planner`) and solves one warm-up landing
+so the first real solve pays no first-call costs. It loads the envelope (for warm starts and fallbacks)
+when it was computed for the same airframe, planner settings and total power loss.
+
+On a failure event (``/helireach/failure_event``) the node takes the latest canonical state
+(``/helireach/state`` + ``/helireach/rotor_state``), solves warm-started from the envelope's nearest
+stored plan, and publishes the trajectory (``/helireach/landing_trajectory``), the predicted path
+(``/helireach/landing_path``) and the plan status (``/helireach/plan_status``), all latched, stamped
+with the state's stamp. Only a plan whose NLP value is ≤ 0 *and* whose independent replay lands
+within limits is called safe.
+
+If no plan is out ``deadline`` seconds after the failure event (the solve is slow or failed), a
+fallback is published, flagged ``fallback=true``: the nearest envelope plan's controls from now on
+(its cell's status is reported), or without an envelope a standard autorotation entry (steady
+autorotation controls at the current speed). A later converged solve replaces it.
+
+While the descent lasts (down to ``replan_min_height``, while the current plan has more than
+``replan_min_remaining`` seconds to go) the node re-plans every ``replan_period`` seconds from the
+current state, warm-started from its previous plan (closed loop). A re-plan that fails keeps the
+current plan. The solver runs in its own mutually exclusive callback group, the deadline in another,
+so under a ``MultiThreadedExecutor`` (CasADi releases the GIL while solving) state reception,
+fallbacks and status publishing go on during a solve.
+
+Run: ``python -m helireach_ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from functools import partial
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
+from nav_msgs.msg import Path as PathMsg
+from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory
+
+from helireach_ros import ros_messages as rm
+from helireach_ros.units import FT, KT
+
+__all__ = ["FallbackPlan", "LandingPlannerNode", "PublishedPlan", "main"]
+
+_PLAN_HISTORY = 200  # published plans kept for inspection (demo, tests)
+
+
+@dataclass(frozen=True)
+class FallbackPlan:
+    """Controls to fly when no converged plan is available in time (never called safe).
+
+    Attributes:
+        kind: ``"envelope_plan"`` or ``"autorotation_entry"``.
+        description: for people.
+        time_to_land: s (the stored plan's, or the estimated descent time).
+        control_times, control_values, control_interpolation: the control function.
+        source_status: the status of the envelope cell it comes from (``"none"`` for the entry).
+    """
+
+    kind: str
+    description: str
+    time_to_land: float
+    control_times: np.ndarray
+    control_values: np.ndarray
+    control_interpolation: str
+    source_status: str = "none"
+
+
+@dataclass
+class PublishedPlan:
+    """A plan as published: the core plan (or fallback), its stamp and bookkeeping."""
+
+    failure_id: int
+    replan_index: int
+    stamp_ns: int
+    plan: Any
+    fallback: bool
+    latency_ms: float
+    published_at_ns: int
+    warm_start_source: str
+
+
+@dataclass
+class _Failure:
+    """One engine failure being handled."""
+
+    failure_id: int
+    event_stamp_ns: int
+    event_received_ns: int
+    active: bool = True
+    published: bool = False
+    current: PublishedPlan | None = None
+    replans: int = 0
+    replans_failed: int = 0
+    history: list[PublishedPlan] = field(default_factory=list)
+
+
+class LandingPlannerNode(Node):
+    """Plans landings after engine failures and re-plans during the descent.
+
+    Parameters: ``airframe``, ``planner_settings`` (file, '' = config/planner.yaml), ``envelope_file``
+    ('' = the shipped one, ``none`` = no envelope), ``deadline`` (s), ``replan_period`` (s, 0 = off),
+    ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s),
+    ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``.
+    """
+
+    def __init__(self, **node_options: Any) -> None:
+        super().__init__("helireach_planner", **node_options)
+        declare = partial(rm.declare_checked_parameter, self)
+        airframe_name = declare("airframe", "uh60a_class", "airframe name or file")
+        settings_file = declare("planner_settings", "", "planner settings file ('' = config/planner.yaml)")
+        envelope_file = declare("envelope_file", "", "envelope for warm starts/fallbacks ('' = shipped, 'none' = off)")
+        self._deadline = declare("deadline", 0.25, "fallback if no plan this long after the failure, s", (0.001, 60.0))
+        self._replan_period = declare("replan_period", 0.25, "closed-loop re-planning period, s (0 = off)", (0.0, 60.0))
+        self._replan_min_height = declare("replan_min_height", 0.5, "no re-planning below this height, m", (0.0, 1e3))
+        self._replan_min_remaining = declare(
+            "replan_min_remaining", 0.3, "no re-planning when the plan has less time left, s", (0.0, 60.0)
+        )
+        self._state_timeout = declare("state_timeout", 0.5, "older states are not planned from, s", (0.01, 60.0))
+        self._assume_total_power_loss = declare(
+            "assume_total_power_loss", True, "plan with zero engine power (else the measured power)"
+        )
+        warm_up = declare("warm_up", True, "solve one landing at startup (first-call costs)")
+        self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "frame of the landing path")
+        self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "JointState joint of the main rotor")
+        diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
+
+        self._lock = threading.Lock()  # latest state, failure bookkeeping
+        self._publish_lock = threading.Lock()  # one plan decision/publication at a time
+        self._odometry: tuple[rm.OdometryReading, int, str] | None = None
+        self._rotor: tuple[rm.RotorReading, int] | None = None
+        self._failure: _Failure | None = None
+        self._failure_count = 0
+        self.published_plans: list[PublishedPlan] = []
+
+        self.planner: Any | None = None
+        self.envelope: Any | None = None
+        self._setup_error = ""
+        try:
+            self._setup_core(airframe_name, settings_file, envelope_file, warm_up)
+        except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
+            self._setup_error = f"{type(error).__name__}: {error}"
+            self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
+
+        self._solver_group = MutuallyExclusiveCallbackGroup()
+        self._deadline_group = MutuallyExclusiveCallbackGroup()
+        self._trajectory_publisher = self.create_publisher(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, rm.LATCHED_QOS)
+        self._path_publisher = self.create_publisher(PathMsg, rm.TOPIC_LANDING_PATH, rm.LATCHED_QOS)
+        self._status_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_PLAN_STATUS, rm.LATCHED_QOS)
+        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
+        self.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
+        self.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
+        self.create_subscription(
+            Header, rm.TOPIC_FAILURE_EVENT, self._on_failure_event, rm.EVENT_QOS, callback_group=self._solver_group
+        )
+        self._deadline_timer = self.create_timer(
+            self._deadline, self._on_deadline, callback_group=self._deadline_group, autostart=False
+        )
+        if self._replan_period > 0.0:
+            self.create_timer(self._replan_period, self._on_replan_timer, callback_group=self._solver_group)
+        self.create_timer(diagnostics_period, self._publish_diagnostics)
+
+    # -- startup -----------------------------------------------------------------------------------------------
+    def _setup_core(self, airframe_name: str, settings_file: str, envelope_file: str, warm_up: bool) -> None:
+        """Loads airframe, settings and envelope, builds the NLP (once) and warms it up."""
+        from helireach_ros.airframe import load_airframe
+        from helireach_ros.model import initial_state_after_failure
+        from helireach_ros.planner import get_planner
+        from helireach_ros.settings import load_settings
+
+        started = time.perf_counter()
+        self.airframe = load_airframe(airframe_name)
+        self.settings = load_settings(settings_file or None)
+        self.planner = get_planner(self.airframe, self.settings)
+        self.envelope, self._envelope_note = self._load_envelope(envelope_file)
+        self.warm_up_ms = math.nan
+        if warm_up:
+            state = initial_state_after_failure(self.airframe, 500.0 * FT, 75.0 * KT)
+            stored = self.envelope.nearest_plan(state.height, state.forward_speed) if self.envelope else None
+            warm_up_started = time.perf_counter()
+            self.planner.plan(state, stored.warm_start if stored else None)
+            self.warm_up_ms = 1e3 * (time.perf_counter() - warm_up_started)
+        self.startup_s = time.perf_counter() - started
+        self.get_logger().info(
+            f"planner ready for {self.airframe.name} ({self.settings.method}, {self.settings.intervals} intervals) "
+            f"in {self.startup_s:.2f} s; {self._envelope_note}"
+        )
+
+    def _load_envelope(self, path: str) -> tuple[Any | None, str]:
+        if path.strip().lower() == "none":
+            return None, "no envelope (disabled): cold starts, autorotation-entry fallback"
+        try:
+            from helireach_ros.envelope import default_envelope_path, load_envelope
+
+            resolved = path or str(default_envelope_path())
+            envelope = load_envelope(resolved, self.airframe, self.settings, 0.0)
+            return envelope, f"envelope {envelope.envelope_id} for warm starts and fallbacks"
+        except Exception as error:  # missing or mismatched: plan cold, fall back to the autorotation entry
+            note = f"envelope not usable ({type(error).__name__}: {error}): cold starts, autorotation-entry fallback"
+            self.get_logger().warning(note)
+            return None, note
+
+    # -- inputs ------------------------------------------------------------------------------------------------
+    def _now_ns(self) -> int:
+        return self.get_clock().now().nanoseconds
+
+    def _on_state(self, message: Odometry) -> None:
+        reading = rm.read_odometry(message)
+        if rm.state_problems(rm.StateLimits(), odometry=reading):
+            return  # the monitor filters; a direct publisher's garbage is ignored here too
+        with self._lock:
+            self._odometry = (reading, self._now_ns(), message.child_frame_id or rm.DEFAULT_BODY_FRAME)
+
+    def _on_rotor(self, message: JointState) -> None:
+        try:
+            reading = rm.read_rotor(message, self._rotor_joint)
+        except ValueError:
+            return
+        if rm.state_problems(rm.StateLimits(), rotor=reading):
+            return
+        with self._lock:
+            self._rotor = (reading, self._now_ns())
+
+    def current_state(self) -> tuple[np.ndarray, int, str, str] | None:
+        """(state y, v, Ω, h, z, P; its stamp ns; vehicle frame; rotor-speed source), or None without a fresh state.
+
+        Without a fresh rotor speed Ω₀ is assumed (the source says so; re-plans are then skipped). Ω is
+        clipped into the rotor limits (noise can put it just outside, where no plan exists).
+        """
+        now_ns = self._now_ns()
+        timeout_ns = self._state_timeout * 1e9
+        with self._lock:
+            odometry, rotor = self._odometry, self._rotor
+        if odometry is None or now_ns - odometry[1] > timeout_ns:
+            return None
+        reading, _, frame = odometry
+        if rotor is not None and now_ns - rotor[1] <= timeout_ns:
+            rotor_speed, source = rotor[0].rotor_speed, "measured"
+            power = rotor[0].engine_power
+        else:
+            rotor_speed, source, power = self.airframe.nominal_rotor_speed, "assumed_nominal", None
+        if self._assume_total_power_loss or power is None:
+            power = 0.0
+        # Sensor noise can put Ω a hair outside the rotor limits, where the NLP has no solution at all.
+        limits, omega0 = self.airframe.limits, self.airframe.nominal_rotor_speed
+        rotor_speed = min(
+            max(rotor_speed, limits.min_rotor_speed_ratio * omega0), limits.max_rotor_speed_ratio * omega0
+        )
+        return rm.helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
+
+    # -- the failure --------------------------------------------------------------------------------------------
+    def _on_failure_event(self, message: Header) -> None:
+        now_ns = self._now_ns()
+        with self._lock:
+            self._failure_count += 1
+            failure = _Failure(self._failure_count, rm.stamp_nanoseconds(message.stamp), now_ns)
+            self._failure = failure
+        self.get_logger().warning(f"engine failure #{failure.failure_id}: planning the landing")
+        if self.planner is None:
+            self._publish_status_only(failure, f"planner not configured ({self._setup_error})")
+            return
+        self._deadline_timer.reset()
+        self._plan_initial(failure)
+
+    def _plan_initial(self, failure: _Failure, retry: bool = False) -> None:
+        """The first plan of a failure, warm-started from the envelope's nearest stored plan.
+
+        ``retry``: called again because no converged plan is out yet; a fallback already out is not repeated.
+        """
+        current = self.current_state()
+        if current is None:
+            self._publish_status_only(failure, "no valid vehicle state at the failure: waiting for one")
+            return
+        state, stamp_ns, frame, rotor_source = current
+        stored = self.envelope.nearest_plan(state[3], state[1]) if self.envelope is not None else None
+        warm_start, source = (stored.warm_start, "envelope") if stored is not None else (None, "none")
+        plan, error = self._solve(state, warm_start)
+        if plan is None or not plan.solver.success:
+            reason = error or f"solver {plan.solver.status}"
+            self.get_logger().error(f"failure #{failure.failure_id}: no converged plan ({reason})")
+            if not (retry and failure.published):
+                self._publish_fallback(failure, state, stamp_ns, reason)
+            return
+        self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False)
+
+    def _solve(self, state: np.ndarray, warm_start: Any) -> tuple[Any | None, str]:
+        try:
+            return self.planner.plan(state, warm_start), ""
+        except (ValueError, RuntimeError) as error:
+            return None, f"{type(error).__name__}: {error}"
+
+    def _on_deadline(self) -> None:
+        self._deadline_timer.cancel()
+        with self._lock:
+            failure = self._failure
+        if failure is None or failure.published:
+            return
+        current = self.current_state()
+        if current is None:
+            self._publish_status_only(failure, f"no plan within {self._deadline:g} s and no valid state")
+            return
+        state, stamp_ns, _, _ = current
+        self._publish_fallback(failure, state, stamp_ns, f"no plan within the {self._deadline:g} s deadline")
+
+    def _on_replan_timer(self) -> None:
+        with self._lock:
+            failure = self._failure
+        if failure is None or not failure.active or self.planner is None:
+            return
+        if not failure.published or failure.current is None or failure.current.fallback:
+            self._plan_initial(failure, retry=True)  # still no converged plan for this failure: keep trying
+            return
+        current = self.current_state()
+        if current is None:
+            return
+        state, stamp_ns, frame, rotor_source = current
+        if rotor_source != "measured":
+            return  # re-planning with an assumed rotor speed could be worse than the current plan
+        previous = failure.current
+        remaining = previous.plan.time_to_land - (stamp_ns - previous.stamp_ns) * 1e-9
+        if state[3] < self._replan_min_height or remaining < self._replan_min_remaining:
+            failure.active = False
+            self.get_logger().info(
+                f"failure #{failure.failure_id}: closed loop ends at {state[3]:.2f} m, {remaining:.2f} s to go "
+                f"({failure.replans} re-plans, {failure.replans_failed} failed)"
+            )
+            return
+        plan, error = self._solve(state, previous.plan.warm_start)
+        if plan is None or not plan.solver.success:
+            failure.replans_failed += 1
+            reason = error or f"solver {plan.solver.status}"
+            self.get_logger().warning(f"re-plan failed ({reason}); keeping the current plan", throttle_duration_sec=1.0)
+            return
+        failure.replans += 1
+        self._publish_plan(failure, plan, stamp_ns, frame, "previous_plan", rotor_source, replan=True)
+
+    # -- fallbacks -----------------------------------------------------------------------------------------------
+    def fallback_plan(self, state: np.ndarray) -> FallbackPlan:
+        """The best available controls without a converged solve (see the module docstring)."""
+        from helireach_ros.model import steady_autorotation
+
+        stored = self.envelope.nearest_plan(state[3], state[1]) if self.envelope is not None else None
+        if stored is not None:
+            return FallbackPlan(
+                "envelope_plan",
+                f"envelope plan of {stored.height / FT:.0f} ft, {stored.speed / KT:.0f} kt ({stored.status})",
+                stored.time_to_land,
+                stored.control_times,
+                stored.control_values,
+                stored.control_interpolation,
+                stored.status,
+            )
+        speed = float(np.clip(state[1], 0.0, 60.0))
+        descent_rate, thrust_coefficient, pitch = steady_autorotation(self.airframe, speed)
+        duration = float(np.clip(state[3] / max(descent_rate, 1.0), 1.0, self.settings.max_time_to_land))
+        return FallbackPlan(
+            "autorotation_entry",
+            f"steady autorotation entry at {speed / KT:.0f} kt (C_T {thrust_coefficient:.4f}, pitch "
+            f"{math.degrees(pitch):.1f} deg)",
+            duration,
+            np.array([0.0, duration]),
+            np.array([[thrust_coefficient], [pitch]]),
+            "zero_order_hold",
+        )
+
+    def _publish_fallback(self, failure: _Failure, state: np.ndarray, stamp_ns: int, reason: str) -> None:
+        try:
+            fallback = self.fallback_plan(state)
+        except Exception as error:  # the last resort must not take the node down
+            self._publish_status_only(failure, f"{reason}; no fallback available ({error})")
+            return
+        with self._publish_lock:
+            if failure is not self._failure or (failure.current is not None and not failure.current.fallback):
+                return  # a newer failure or a converged plan came first
+            now_ns = self._now_ns()
+            record = PublishedPlan(
+                failure.failure_id,
+                failure.replans,
+                stamp_ns,
+                fallback,
+                True,
+                (now_ns - failure.event_received_ns) * 1e-6,
+                now_ns,
+                "none",
+            )
+            self._trajectory_publisher.publish(rm.trajectory_message(fallback, stamp_ns))
+            values = {
+                "status": "fallback",
+                "safe": False,
+                "verified": False,
+                "fallback": True,
+                "fallback_kind": fallback.kind,
+                "fallback_source_status": fallback.source_status,
+                "reason": reason,
+                "time_to_land_s": fallback.time_to_land,
+                "latency_ms": record.latency_ms,
+                **self._common_values(failure, state, stamp_ns),
+            }
+            self._status_publisher.publish(
+                rm.diagnostic_status(
+                    DiagnosticStatus.WARN,
+                    f"{self.get_name()}: landing plan",
+                    f"FALLBACK (not verified): {fallback.description}; {reason}",
+                    self.airframe.name,
+                    values,
+                )
+            )
+            self._remember(failure, record)
+        self.get_logger().warning(f"failure #{failure.failure_id}: published fallback {fallback.description}")
+
+    # -- publishing ----------------------------------------------------------------------------------------------
+    def _common_values(self, failure: _Failure, state: np.ndarray, stamp_ns: int) -> dict[str, Any]:
+        return {
+            "failure_id": failure.failure_id,
+            "failure_stamp_ns": failure.event_stamp_ns,
+            "state_stamp_ns": stamp_ns,
+            "initial_descent_rate_m_s": state[0],
+            "initial_forward_speed_m_s": state[1],
+            "initial_rotor_speed_rad_s": state[2],
+            "initial_height_m": state[3],
+            "initial_distance_m": state[4],
+            "initial_engine_power_w": state[5],
+            "airframe": self.airframe.name,
+            "envelope_id": self.envelope.envelope_id if self.envelope is not None else "",
+        }
+
+    def _publish_plan(
+        self,
+        failure: _Failure,
+        plan: Any,
+        stamp_ns: int,
+        frame: str,
+        warm_source: str,
+        rotor_source: str,
+        replan: bool,
+    ) -> None:
+        """Publishes a converged plan (safe, unverified or unsafe) as trajectory, path and status."""
+        with self._publish_lock:
+            if failure is not self._failure:
+                return  # a newer failure superseded this one while solving
+            now_ns = self._now_ns()
+            late = not replan and failure.published
+            reference_ns = failure.event_received_ns if not replan else stamp_ns
+            record = PublishedPlan(
+                failure.failure_id,
+                failure.replans,
+                stamp_ns,
+                plan,
+                False,
+                (now_ns - reference_ns) * 1e-6,
+                now_ns,
+                warm_source,
+            )
+            self._trajectory_publisher.publish(rm.trajectory_message(plan, stamp_ns, frame))
+            self._path_publisher.publish(
+                rm.path_message(plan.times, plan.states, stamp_ns, self._world_frame, plan.controls[1])
+            )
+            touchdown = plan.replay.touchdown_state
+            values = {
+                "status": plan.status,
+                "safe": plan.safe,
+                "verified": plan.verified,
+                "fallback": False,
+                "value": plan.value,
+                "time_to_land_s": plan.time_to_land,
+                "solve_time_ms": plan.solver.solve_time_ms,
+                "iterations": plan.solver.iterations,
+                "solver_status": plan.solver.status,
+                "warm_start": warm_source,
+                "replan_index": failure.replans if replan else 0,
+                "late": late,
+                "latency_ms": record.latency_ms,
+                "rotor_speed_source": rotor_source,
+                "predicted_touchdown_descent_rate_m_s": touchdown[0],
+                "predicted_touchdown_forward_speed_m_s": touchdown[1],
+                "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
+                **self._common_values(failure, plan.initial_state, stamp_ns),
+            }
+            level, text = self._plan_verdict(plan, rotor_source)
+            self._status_publisher.publish(
+                rm.diagnostic_status(level, f"{self.get_name()}: landing plan", text, self.airframe.name, values)
+            )
+            if not replan:
+                self._deadline_timer.cancel()
+            self._remember(failure, record)
+        if not replan:
+            self.get_logger().info(f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
+
+    @staticmethod
+    def _plan_verdict(plan: Any, rotor_source: str) -> tuple[bytes, str]:
+        touchdown = plan.replay.touchdown_state
+        summary = (
+            f"land in {plan.time_to_land:.1f} s at {touchdown[0] / FT:.1f} ft/s, {touchdown[1] / KT:.1f} kt "
+            f"(value {plan.value:+.2f})"
+        )
+        if plan.safe and rotor_source == "measured":
+            return DiagnosticStatus.OK, f"SAFE: {summary}"
+        if plan.safe:
+            return DiagnosticStatus.WARN, f"SAFE if the rotor speed is nominal (not measured): {summary}"
+        if plan.status == "unverified":
+            return DiagnosticStatus.WARN, f"NOT VERIFIED: the replay does not land within limits; {summary}"
+        return DiagnosticStatus.ERROR, f"UNSAFE: no safe landing, best effort; {summary}"
+
+    def _publish_status_only(self, failure: _Failure, text: str) -> None:
+        self.get_logger().error(f"failure #{failure.failure_id}: {text}")
+        hardware_id = self.airframe.name if self.planner is not None else "helireach"
+        values = {
+            "status": "none",
+            "safe": False,
+            "verified": False,
+            "fallback": False,
+            "reason": text,
+            "failure_id": failure.failure_id,
+        }
+        with self._publish_lock:
+            if failure is self._failure and not failure.published:
+                self._status_publisher.publish(
+                    rm.diagnostic_status(
+                        DiagnosticStatus.ERROR,
+                        f"{self.get_name()}: landing plan",
+                        f"NO PLAN: {text}",
+                        hardware_id,
+                        values,
+                    )
+                )
+
+    def _remember(self, failure: _Failure, record: PublishedPlan) -> None:
+        failure.published = True
+        failure.current = record
+        failure.history.append(record)
+        self.published_plans.append(record)
+        del self.published_plans[:-_PLAN_HISTORY]
+
+    # -- diagnostics ---------------------------------------------------------------------------------------------
+    @property
+    def failure_active(self) -> bool:
+        """A failure is being handled and the closed loop has not ended."""
+        with self._lock:
+            return self._failure is not None and self._failure.active
+
+    def _publish_diagnostics(self) -> None:
+        with self._lock:
+            failure = self._failure
+        if self.planner is None:
+            status = rm.diagnostic_status(
+                DiagnosticStatus.ERROR,
+                f"{self.get_name()}: planner",
+                f"not configured: {self._setup_error}",
+                "helireach",
+            )
+            self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
+            return
+        values: dict[str, Any] = {
+            "airframe": self.airframe.name,
+            "method": self.settings.method,
+            "startup_s": self.startup_s,
+            "warm_up_ms": self.warm_up_ms,
+            "envelope": self._envelope_note,
+            "failures": self._failure_count,
+        }
+        if failure is not None:
+            values.update(failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed)
+            if failure.current is not None:
+                values["last_latency_ms"] = failure.current.latency_ms
+        level = DiagnosticStatus.OK if self.envelope is not None else DiagnosticStatus.WARN
+        text = "ready" if self.envelope is not None else "ready without an envelope (cold starts)"
+        status = rm.diagnostic_status(level, f"{self.get_name()}: planner", text, self.airframe.name, values)
+        self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
+
+
+def main(args: list[str] | None = None) -> None:
+    """Runs the planner node (multi-threaded executor) until Ctrl-C or SIGTERM."""
+    from rclpy.executors import MultiThreadedExecutor
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = LandingPlannerNode()
+        executor = MultiThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == "__main__":
+    main()
