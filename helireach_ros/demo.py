@@ -1,30 +1,223 @@
-"""``make demo``: the 500 ft / 75 kt engine failure of the paper, planned, verified and drawn.
+"""``make demo``: the whole story of an engine failure, in one process, with the embedded defaults.
 
-(The ROS system's full demo replaces this first version.)
+The envelope status node holds the shipped H-V envelope; the simulated helicopter cruises at 500 ft /
+75 kt (scenario ``demo_500ft_75kt``: its drag is 5 % higher than the planner's model, sensors are
+noisy); the engine fails; the planner publishes a verified landing plan, then re-plans from the
+current state four times a second down to the ground; the vehicle touches down and reports its
+descent rate, forward speed and rotor speed. Every topic goes to an MCAP log.
+
+Writes ``<out>/hv_diagram.png`` (the H-V diagram with the flown track), ``<out>/landing_plan.png``
+(the first plan: states, replay and controls) and ``<out>/logs/helireach_*.mcap``; prints a summary.
+Exits 0 only if the landing met the limits. ``--hold`` keeps the nodes running after touchdown
+(e.g. with ``--display`` to look at the cockpit page) until Ctrl-C.
+
+Run: ``python -m helireach_ros.demo --out out [--hold] [--display] [--scenario NAME]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import time
 from pathlib import Path
+from typing import Any
 
-__all__ = ["main"]
+import numpy as np
+
+__all__ = ["DemoResult", "main", "run_demo"]
+
+_TOUCHDOWN_TIMEOUT_S = 120.0  # wall time from start; the demo scenario lands about 16 s in
+_SETTLE_S = 0.5  # after touchdown: let the recorder take the last messages
+
+
+class DemoResult:
+    """What a demo run produced (for the summary and for tests).
+
+    Attributes:
+        status_before_failure: the last safety verdict while cruising (level name, message) or None.
+        touchdown: the vehicle's :class:`~helireach_ros.simulation.TouchdownReport` (None on timeout).
+        first_plan: the first published plan record (:class:`~helireach_ros.nodes.planner_node.PublishedPlan`).
+        plans: every plan published for the failure.
+        log_path: the MCAP log.
+        message_count: messages recorded.
+        track: N × 2 (height m, speed m/s) flown.
+        figures: paths written.
+    """
+
+    def __init__(self) -> None:
+        self.status_before_failure: tuple[str, str] | None = None
+        self.touchdown: Any = None
+        self.first_plan: Any = None
+        self.plans: list[Any] = []
+        self.replans_failed = 0
+        self.log_path: Path | None = None
+        self.message_count = 0
+        self.track = np.zeros((0, 2))
+        self.figures: list[Path] = []
+        self.scenario: Any = None
+        self.limits: Any = None
+        self.nominal_rotor_speed = float("nan")
+
+    @property
+    def landed_within_limits(self) -> bool:
+        """The vehicle touched down within the landing limits."""
+        return self.touchdown is not None and bool(self.touchdown.within_limits)
+
+
+def run_demo(
+    out_dir: str | os.PathLike[str],
+    scenario: str | None = None,
+    hold: bool = False,
+    display: bool = False,
+    params_files: tuple[str, ...] = (),
+    context: Any = None,
+    handle_signals: bool = True,
+    figures: bool = True,
+) -> DemoResult:
+    """Runs the demo (see the module docstring) and returns what it produced."""
+    from helireach_ros.bringup import build_system
+    from helireach_ros.ros_messages import LEVEL_NAMES
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    extra = []
+    if display:
+        from helireach_ros.nodes.display import CockpitDisplay
+
+        extra.append(CockpitDisplay)
+    result = DemoResult()
+    system = build_system(
+        params_files,
+        with_sim=True,
+        log_dir=out / "logs",
+        scenario=scenario,
+        extra_nodes=extra,
+        context=context,
+        handle_signals=handle_signals,
+        command="python -m helireach_ros.demo",
+    )
+    sim, planner, status = system.sim, system.planner, system.envelope_status
+    assert sim is not None
+    result.log_path, result.scenario = system.log_path, sim.scenario
+    result.limits, result.nominal_rotor_speed = (
+        sim.vehicle.airframe.limits,
+        sim.vehicle.nominal_airframe.nominal_rotor_speed,
+    )
+    try:
+        started = time.monotonic()
+
+        def cruising() -> bool:
+            verdict = status.verdict
+            if verdict is not None and sim.vehicle.phase == "cruise":
+                result.status_before_failure = (LEVEL_NAMES.get(verdict.level, "?"), verdict.message)
+            return sim.vehicle.phase != "cruise"
+
+        system.spin_until(cruising, _TOUCHDOWN_TIMEOUT_S)
+        system.spin_until(lambda: sim.touchdown is not None, _TOUCHDOWN_TIMEOUT_S - (time.monotonic() - started))
+        system.spin_until(lambda: False, _SETTLE_S)
+        result.touchdown = sim.touchdown
+        result.plans = [record for record in planner.published_plans if record.failure_id == 1]
+        converged = [record for record in result.plans if not record.fallback]
+        result.first_plan = converged[0] if converged else (result.plans[0] if result.plans else None)
+        result.track = np.array([[state[3], state[1]] for _, state in sim.vehicle.history])
+        if hold and system.context.ok():
+            print("helireach demo: holding the nodes after touchdown; Ctrl-C to end", flush=True)
+            system.spin_until(lambda: False, float("inf"), step_s=0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if system.recorder is not None:
+            result.message_count = system.recorder.message_count
+        system.shutdown()
+    if figures:
+        result.figures = _write_figures(out, result, status.envelope)
+    return result
+
+
+def _write_figures(out: Path, result: DemoResult, envelope: Any) -> list[Path]:
+    written = []
+    if envelope is not None and len(result.track):
+        from helireach_ros.envelope_plot import plot_envelope
+
+        written.append(plot_envelope(envelope, out / "hv_diagram.png", track=result.track, title_extra="flown track"))
+    plan = result.first_plan.plan if result.first_plan is not None else None
+    if plan is not None and hasattr(plan, "replay"):
+        from helireach_ros.plan_plot import plot_landing_plan
+
+        written.append(plot_landing_plan(plan, out / "landing_plan.png"))
+    return written
+
+
+def summary(result: DemoResult) -> str:
+    """The human-readable summary (feet, knots, percent)."""
+    from helireach_ros.units import FT, KT
+
+    scenario, limits = result.scenario, result.limits
+    mismatch = ", ".join(f"{name} {fraction:+.0%}" for name, fraction in scenario.parameter_mismatch.items()) or "none"
+    lines = [
+        f"helireach demo: {scenario.name}: {scenario.height / FT:.0f} ft, {scenario.forward_speed / KT:.0f} kt, "
+        f"engine failure at {scenario.failure_time:g} s (vehicle vs model: {mismatch})",
+    ]
+    level, message = result.status_before_failure or ("none", "no safety status received")
+    lines.append(f"  status before the failure : {level}: {message}")
+    first = result.first_plan
+    if first is None:
+        lines.append("  landing plan              : none published")
+    elif first.fallback:
+        lines.append(f"  landing plan              : FALLBACK {first.plan.description} after {first.latency_ms:.0f} ms")
+    else:
+        plan = first.plan
+        lines.append(
+            f"  landing plan              : {plan.status.upper()} (value {plan.value:+.2f}), IPOPT "
+            f"{plan.solver.solve_time_ms:.0f} ms / {plan.solver.iterations} iterations, failure to trajectory "
+            f"{first.latency_ms:.0f} ms, land in {plan.time_to_land:.1f} s"
+        )
+    replans = max((record.replan_index for record in result.plans), default=0)
+    lines.append(f"  closed loop               : {replans} re-plans from the current state")
+    touchdown = result.touchdown
+    if touchdown is None:
+        lines.append("  touchdown                 : none (timeout)")
+    else:
+        omega0 = result.nominal_rotor_speed
+        lines.append(
+            f"  touchdown                 : {touchdown.descent_rate / FT:.1f} ft/s (limit "
+            f"{limits.max_descent_rate / FT:.0f}), {touchdown.forward_speed / KT:.1f} kt (limit "
+            f"{limits.max_forward_speed / KT:.0f}), rotor {100 * touchdown.rotor_speed / omega0:.0f} % (in flight "
+            f"{100 * touchdown.min_rotor_speed / omega0:.1f}-{100 * touchdown.max_rotor_speed / omega0:.1f} %, limits "
+            f"{100 * limits.min_rotor_speed_ratio:.0f}-{100 * limits.max_rotor_speed_ratio:.0f} %), "
+            f"{touchdown.time_after_failure:.1f} s after the failure"
+        )
+    verdict = (
+        "SAFE: landed within limits"
+        if result.landed_within_limits
+        else "UNSAFE: " + (touchdown.reason if touchdown is not None else "no touchdown")
+    )
+    lines.append(f"  result                    : {verdict}")
+    lines.append(f"  MCAP log                  : {result.log_path} ({result.message_count} messages)")
+    for figure in result.figures:
+        lines.append(f"  figure                    : {figure}")
+    return "\n".join(lines)
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Plans the paper's example landing and writes its figure; exits 0 only if it is safe."""
-    parser = argparse.ArgumentParser(prog="helireach-demo", description=__doc__)
-    parser.add_argument("--out", default="out", help="folder for the figure")
+    """``python -m helireach_ros.demo``; exits 0 only if the landing met the limits."""
+    parser = argparse.ArgumentParser(prog="helireach-demo", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--out", default="out", help="folder for the figures and the MCAP log")
+    parser.add_argument("--scenario", default=None, help="simulated scenario (default: demo_500ft_75kt)")
+    parser.add_argument("--hold", action="store_true", help="keep the nodes running after touchdown until Ctrl-C")
+    parser.add_argument("--display", action="store_true", help="also run the cockpit display node")
+    parser.add_argument("--params-file", action="append", default=[], help="extra ROS parameter file (repeatable)")
     arguments = parser.parse_args(argv)
-    from helireach_ros.plan_cli import run_plan
-
-    figure = Path(arguments.out) / "landing_500ft_75kt.png"
-    plan_arguments = argparse.Namespace(
-        airframe="uh60a_class", height_ft=500.0, speed_kt=75.0, power_fraction=0.0, method=None, settings=None,
-        weight_lb=None, density_altitude_ft=None, json=False, plot=str(figure),
-    )  # fmt: skip
-    return run_plan(plan_arguments)
+    result = run_demo(
+        arguments.out,
+        arguments.scenario,
+        hold=arguments.hold,
+        display=arguments.display,
+        params_files=tuple(arguments.params_file),
+    )
+    print(summary(result), flush=True)
+    return 0 if result.landed_within_limits else 1
 
 
 if __name__ == "__main__":
