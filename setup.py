@@ -35,6 +35,13 @@ setup(
     entry_points={
         "console_scripts": [
             "helireach = helireach_ros.cli:main",
+            "helireach_monitor = helireach_ros.nodes.monitor:main",
+            "helireach_envelope_status = helireach_ros.nodes.envelope_status:main",
+            "helireach_planner = helireach_ros.nodes.planner_node:main",
+            "helireach_sim_vehicle = helireach_ros.nodes.sim_vehicle:main",
+            "helireach_recorder = helireach_ros.nodes.recorder:main",
+            "helireach_display = helireach_ros.nodes.display:main",
+            "helireach_replay = helireach_ros.log_replay:main",
         ],
     },
 )
