@@ -92,10 +92,11 @@ class Transcription(ABC):
         self.hover_thrust_coefficient = hover.thrust_coefficient
         limits = airframe.limits
         omega0 = airframe.nominal_rotor_speed
-        self.state_lower = np.array(
-            [-60.0, -30.0, limits.min_rotor_speed_ratio * omega0, -limits.ground_clearance, -1e4, 0.0]
-        )
-        self.state_upper = np.array([100.0, 120.0, limits.max_rotor_speed_ratio * omega0, 1e4, 1e5, 1e9])
+        # Tightened by the back-off: the limits hold at the nodes, the replay checks them in between.
+        rotor_low = (limits.min_rotor_speed_ratio + settings.rotor_speed_backoff) * omega0
+        rotor_high = (limits.max_rotor_speed_ratio - settings.rotor_speed_backoff) * omega0
+        self.state_lower = np.array([-60.0, -30.0, rotor_low, -limits.ground_clearance, -1e4, 0.0])
+        self.state_upper = np.array([100.0, 120.0, rotor_high, 1e4, 1e5, 1e9])
         self.control_lower = np.array([0.0, -limits.max_pitch_angle])
         self.control_upper = np.array([airframe.max_thrust_coefficient, limits.max_pitch_angle])
         self.initial_state = ca.SX.sym("x0", 6)
