@@ -29,6 +29,9 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python bench/plan_latency.py
+	$(BIN)/python bench/replay_failures.py
+	$(BIN)/python bench/envelope_throughput.py
+	test ! -f bench/failure_latency.py || $(BIN)/python bench/failure_latency.py
 
 clean:
 	rm -rf $(VENV) $(OUT) build install log *.egg-info
