@@ -109,6 +109,8 @@ class HelireachSystem:
         self._closed = True
         if self.recorder is not None:
             self.recorder.close()  # first: the file is complete whatever happens next
+        for node in self.nodes:
+            self.executor.remove_node(node)  # no callback may start on a node being destroyed
         self.executor.shutdown(timeout_sec=5.0)
         for node in self.nodes:
             node.destroy_node()
