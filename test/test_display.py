@@ -32,7 +32,6 @@ import aiohttp
 import numpy as np
 import pytest
 import rclpy
-from builtin_interfaces.msg import Duration as DurationMsg
 from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped
@@ -47,6 +46,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from helireach_ros import ros_messages as rm
 from helireach_ros.airframe import load_airframe
 from helireach_ros.envelope import default_envelope_path, load_envelope
 from helireach_ros.nodes.display import (
@@ -193,6 +193,7 @@ class DevToolsPage:
         self.target = target
         self._socket: aiohttp.ClientWebSocketResponse | None = None
         self._next_id = 0
+        self.errors: list[str] = []  # uncaught exceptions and console/CSP errors seen in the page
 
     @classmethod
     async def open(cls, http: aiohttp.ClientSession, browser: Browser, url: str) -> DevToolsPage:
@@ -202,6 +203,7 @@ class DevToolsPage:
         page._socket = await http.ws_connect(target["webSocketDebuggerUrl"], max_msg_size=0)
         await page.send("Page.enable")
         await page.send("Runtime.enable")
+        await page.send("Log.enable")
         await page.send("Emulation.setDeviceMetricsOverride", **VIEWPORT, deviceScaleFactor=1, mobile=False)
         await page.send("Page.navigate", url=url)
         return page
@@ -216,6 +218,16 @@ class DevToolsPage:
             if message.type != aiohttp.WSMsgType.TEXT:
                 raise RuntimeError(f"DevTools connection ended: {message}")
             reply = json.loads(message.data)
+            event = reply.get("method")
+            if event == "Runtime.exceptionThrown":
+                self.errors.append(json.dumps(reply["params"]["exceptionDetails"])[:500])
+            elif event == "Log.entryAdded" and reply["params"]["entry"]["level"] == "error":
+                entry = reply["params"]["entry"]
+                # a page that outlives its server logs failed reconnects; anything else is a page error
+                if entry.get("source") != "network":
+                    self.errors.append(f"{entry.get('source')}: {entry.get('text')}")
+            elif event == "Runtime.consoleAPICalled" and reply["params"]["type"] == "error":
+                self.errors.append(json.dumps(reply["params"]["args"])[:500])
             if reply.get("id") == command_id:
                 if "error" in reply:
                     raise RuntimeError(f"{method}: {reply['error']}")
@@ -396,48 +408,24 @@ def real_plan() -> Any:
 
 
 def plan_messages(plan: Any, start: TimeMsg) -> tuple[JointTrajectory, PathMsg, DiagnosticStatus]:
-    """The trajectory, predicted path and plan status for ``plan``, stamped from ``start``."""
-
-    def stamp_at(seconds: float) -> TimeMsg:
-        nanoseconds = start.sec * 1_000_000_000 + start.nanosec + round(seconds * 1e9)
-        return TimeMsg(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000)
-
-    trajectory = JointTrajectory(joint_names=["collective_thrust_coefficient", "pitch_angle"])
-    trajectory.header.stamp = start
-    sample_times = np.linspace(0.0, plan.time_to_land, 120)
-    for t, (thrust, pitch) in zip(sample_times, plan.controls_at(sample_times).T, strict=True):
-        nanoseconds = round(float(t) * 1e9)
-        trajectory.points.append(
-            JointTrajectoryPoint(
-                positions=[float(thrust), float(pitch)],
-                time_from_start=DurationMsg(sec=nanoseconds // 1_000_000_000, nanosec=nanoseconds % 1_000_000_000),
-            )
-        )
-    path = PathMsg()
-    path.header.stamp = start
-    path.header.frame_id = "failure"
-    for t, state in zip(plan.times, plan.states.T, strict=True):
-        pose = PoseStamped()
-        pose.header.stamp = stamp_at(float(t))
-        pose.header.frame_id = "failure"
-        pose.pose.position.x = float(state[4])  # z: forward distance
-        pose.pose.position.z = float(state[3])  # h: height
-        pose.pose.orientation.w = 1.0
-        path.poses.append(pose)
-    status = DiagnosticStatus(
-        level=DiagnosticStatus.OK if plan.safe else DiagnosticStatus.ERROR,
-        name="helireach: plan",
-        message=f"plan {plan.status}",
-        values=[
-            KeyValue(key="safe", value=str(plan.safe).lower()),
-            KeyValue(key="verified", value=str(plan.verified).lower()),
-            KeyValue(key="fallback", value="false"),
-            KeyValue(key="value", value=f"{plan.value:.6f}"),
-            KeyValue(key="time_to_land_s", value=f"{plan.time_to_land:.3f}"),
-            KeyValue(key="solve_time_ms", value=f"{plan.solver.solve_time_ms:.1f}"),
-        ],
+    """The trajectory, predicted path and plan status for ``plan`` as the planner node publishes them."""
+    stamp_ns = rm.stamp_nanoseconds(start)
+    values = {
+        "status": plan.status,
+        "safe": plan.safe,
+        "verified": plan.verified,
+        "fallback": False,
+        "value": plan.value,
+        "time_to_land_s": plan.time_to_land,
+        "solve_time_ms": plan.solver.solve_time_ms,
+        "replan_index": 0,
+    }
+    level = DiagnosticStatus.OK if plan.safe else DiagnosticStatus.ERROR
+    return (
+        rm.trajectory_message(plan, stamp_ns),
+        rm.path_message(plan.times, plan.states, stamp_ns),
+        rm.diagnostic_status(level, "helireach_planner: landing plan", f"plan {plan.status}", "test", values),
     )
-    return trajectory, path, status
 
 
 @pytest.fixture(scope="module")
@@ -567,6 +555,7 @@ def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, r
         png = await page.screenshot()
         assert png.startswith(b"\x89PNG")
         save_artifact(tmp_path, "display.png", png)
+        assert page.errors == [], f"the page reported errors: {page.errors}"
 
         # a re-plan that missed its deadline: the planner falls back and says so
         fallback = DiagnosticStatus(
@@ -578,6 +567,54 @@ def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, r
         await page.wait_for(PLAN, lambda p: p.get("badge") == "FALLBACK", "the FALLBACK badge")
 
     run_page(browser, display.url, scenario)
+
+
+def envelope_points(envelope: Any, warn_margin: float) -> tuple[tuple[float, float], ...]:
+    """(height m, speed m/s) of a state well inside the safe set, one near its boundary and one unsafe."""
+    heights = np.linspace(50 * FT, float(envelope.heights[-1]) - 10 * FT, 40)
+    speeds = np.linspace(0.0, float(envelope.speeds[-1]) - 5 * KT, 120)
+    found: dict[str, tuple[float, float]] = {}
+    for height in heights:
+        for speed in speeds:
+            query = envelope.query(float(height), float(speed))
+            if query.status == "safe" and query.margin > 3 * warn_margin:
+                found.setdefault("safe", (float(height), float(speed)))
+            elif query.status == "safe" and 0.2 * warn_margin < query.margin < 0.8 * warn_margin:
+                found.setdefault("caution", (float(height), float(speed)))
+            elif query.status == "unsafe":
+                found.setdefault("avoid", (float(height), float(speed)))
+    assert found.keys() == {"safe", "caution", "avoid"}, f"the envelope lacks test points: {found}"
+    return found["safe"], found["caution"], found["avoid"]
+
+
+@needs_chromium
+def test_page_follows_the_real_status_node(browser: Browser, envelope_file: Path, tmp_path: Path) -> None:
+    from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
+    from helireach_ros.nodes.monitor import VehicleMonitor
+
+    harness = RosHarness(vehicle_topic="/vehicle/odometry", envelope_file=str(envelope_file))
+    try:
+        harness.add(VehicleMonitor(context=harness.context))
+        status_node = harness.add(
+            EnvelopeStatusNode(
+                context=harness.context, parameter_overrides=[Parameter("envelope_file", value=str(envelope_file))]
+            )
+        )
+        warn_margin = status_node.get_parameter("warn_margin").value
+        safe, caution, avoid = envelope_points(load_envelope(envelope_file), warn_margin)
+        harness.vehicle.rotor_speed = 27.0
+
+        async def scenario(page: DevToolsPage) -> None:
+            for (height, speed), level in ((safe, "safe"), (caution, "caution"), (avoid, "avoid")):
+                harness.vehicle.set((height, speed, 0.0))
+                await page.banner(level, f"{level} from the status node at {height / FT:.0f} ft {speed / KT:.0f} kt")
+                await page.wait_for(MARKER, lambda m, h=height: near(m["heightFt"], h / FT), "the marker")
+            harness.vehicle.set(None)  # the vehicle falls silent: the status node says STALE
+            await page.banner("nodata", "NO DATA from the status node", detail="OLD")
+
+        run_page(browser, harness.display.url, scenario)
+    finally:
+        harness.close()
 
 
 # ------------------------------------------------------------------------------------------------------------

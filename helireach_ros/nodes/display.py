@@ -34,6 +34,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from importlib import resources as importlib_resources
 from pathlib import Path
 from typing import Any
@@ -41,20 +42,19 @@ from typing import Any
 import numpy as np
 import rclpy
 from aiohttp import WSCloseCode, WSMsgType, web
-from builtin_interfaces.msg import Duration, Time
-from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
+from helireach_ros import ros_messages as rm
 from helireach_ros.units import FT, KT
 
 __all__ = [
@@ -79,16 +79,6 @@ __all__ = [
 DEFAULT_PORT = 8080
 DEFAULT_BIND = "127.0.0.1"
 
-SAFETY_STATUS_TOPIC = "/helireach/safety_status"
-TRAJECTORY_TOPIC = "/helireach/landing_trajectory"
-PATH_TOPIC = "/helireach/landing_path"
-PLAN_STATUS_TOPIC = "/helireach/plan_status"
-ROTOR_TOPIC = "/vehicle/rotor"
-FAILURE_EVENT_TOPIC = "/helireach/failure_event"
-
-ROTOR_JOINT = "main_rotor"
-COLLECTIVE_JOINT = "collective_thrust_coefficient"
-PITCH_JOINT = "pitch_angle"
 
 # Keys of the DiagnosticStatus values (first match wins; the status/planner nodes own the names, see msg_docs/).
 _MARGIN_KEYS = ("margin_ft_kt", "margin")
@@ -158,10 +148,6 @@ def _finite_list(values: Iterable[Any]) -> list[float | None]:
     return [_finite(value) for value in values]
 
 
-def _key_values(values: Sequence[KeyValue]) -> dict[str, str]:
-    return {str(item.key): str(item.value) for item in values}
-
-
 def _lookup(values: Mapping[str, str], keys: Sequence[str]) -> str | None:
     for key in keys:
         if key in values:
@@ -178,10 +164,6 @@ def _parse_bool(text: str | None) -> bool | None:
     if lowered in ("false", "0", "no", "unsafe", "unverified", "failed"):
         return False
     return None
-
-
-def _seconds(duration: Duration | Time) -> float:
-    return float(duration.sec) + 1e-9 * float(duration.nanosec)
 
 
 def _decimation(count: int) -> np.ndarray:
@@ -334,29 +316,22 @@ def rotor_limits_section(airframe: Any = None, metadata: Mapping[str, Any] | Non
 
 
 def trajectory_section(message: JointTrajectory) -> dict[str, Any]:
-    """Collective and pitch against time from a landing trajectory.
+    """Collective and pitch against time from a landing trajectory (:func:`ros_messages.read_trajectory`).
 
     Returns:
-        ``{"t_s", "collective", "pitch_rad", "stamp_s"}`` (lists, NaN → None), or ``{"error": text}``.
+        ``{"t_s", "collective", "pitch_rad", "stamp_s"}`` (lists), or ``{"error": text}`` for an unreadable one.
     """
-    names = list(message.joint_names)
-    missing = [joint for joint in (COLLECTIVE_JOINT, PITCH_JOINT) if joint not in names]
-    if missing:
-        return {"error": f"trajectory lacks joint(s) {', '.join(missing)}"}
-    if not message.points:
-        return {"error": "trajectory has no points"}
-    collective_index, pitch_index = names.index(COLLECTIVE_JOINT), names.index(PITCH_JOINT)
-    keep = _decimation(len(message.points))
-    times, collective, pitch = [], [], []
-    for index in keep:
-        point = message.points[int(index)]
-        positions = list(point.positions)
-        if len(positions) != len(names):
-            return {"error": f"trajectory point {int(index)} has {len(positions)} positions for {len(names)} joints"}
-        times.append(_finite(_seconds(point.time_from_start)))
-        collective.append(_finite(positions[collective_index]))
-        pitch.append(_finite(positions[pitch_index]))
-    return {"t_s": times, "collective": collective, "pitch_rad": pitch, "stamp_s": _seconds(message.header.stamp)}
+    try:
+        stamp_ns, times, values = rm.read_trajectory(message)
+    except ValueError as error:
+        return {"error": str(error)}
+    keep = _decimation(times.size)
+    return {
+        "t_s": times[keep].tolist(),
+        "collective": values[0, keep].tolist(),
+        "pitch_rad": values[1, keep].tolist(),
+        "stamp_s": stamp_ns * 1e-9,
+    }
 
 
 def path_section(message: PathMsg) -> dict[str, Any]:
@@ -371,7 +346,8 @@ def path_section(message: PathMsg) -> dict[str, Any]:
     keep = _decimation(len(poses))
     x = np.array([poses[int(i)].pose.position.x for i in keep], dtype=float)
     z = np.array([poses[int(i)].pose.position.z for i in keep], dtype=float)
-    stamps = np.array([_seconds(poses[int(i)].header.stamp) for i in keep], dtype=float)
+    stamps_ns = np.array([rm.stamp_nanoseconds(poses[int(i)].header.stamp) for i in keep], dtype=np.int64)
+    stamps = (stamps_ns - stamps_ns[0]) * 1e-9  # relative first: seconds since 1970 lose precision as floats
     speed: list[float | None] | None = None
     if x.size >= 2 and np.all(np.diff(stamps) > 0) and np.all(np.isfinite(x)):
         speed = _finite_list(np.gradient(x, stamps))
@@ -379,8 +355,11 @@ def path_section(message: PathMsg) -> dict[str, Any]:
 
 
 def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
-    """The plan's verdict: level, safe/verified/fallback flags, value, time to land, solve time and all values."""
-    values = _key_values(message.values)
+    """The plan's verdict: level, flags (safe/verified/fallback), value, timing, predicted touchdown, all values.
+
+    The keys are the planner node's (``helireach_ros.nodes.planner_node``, ``msg_docs/``); a missing key is None.
+    """
+    values = rm.status_values(message)
     return {
         "level": banner_level(message.level),
         "message": str(message.message),
@@ -390,6 +369,9 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
         "value": _finite(_lookup(values, _PLAN_VALUE_KEYS)),
         "time_to_land_s": _finite(_lookup(values, _PLAN_TIME_TO_LAND_KEYS)),
         "solve_time_ms": _finite(_lookup(values, _PLAN_SOLVE_TIME_KEYS)),
+        "replan_index": _finite(values.get("replan_index")),
+        "touchdown_descent_rate_ms": _finite(values.get("predicted_touchdown_descent_rate_m_s")),
+        "touchdown_forward_speed_ms": _finite(values.get("predicted_touchdown_forward_speed_m_s")),
         "values": values,
     }
 
@@ -613,17 +595,19 @@ class CockpitDisplay(Node):
         super().__init__("helireach_display", **node_options)
         self._lock = threading.Lock()
         self._latest = _Latest()
-        self._port = self._declare("port", DEFAULT_PORT, "TCP port of the page (0 = any free port)", integer=(0, 65535))
-        self._bind = self._declare("bind", DEFAULT_BIND, "listen address; loopback unless set explicitly")
-        self._envelope_file = self._declare("envelope_file", "", "H-V envelope file ('' = the shipped envelope)")
-        self._airframe_name = self._declare("airframe", "", "airframe for rotor limits ('' = the envelope's)")
-        state_topic = self._declare("state_topic", "/helireach/state", "nav_msgs/Odometry vehicle state topic")
-        rotor_topic = self._declare("rotor_topic", ROTOR_TOPIC, "sensor_msgs/JointState rotor speed topic")
-        self._stale_after_s = self._declare(
-            "stale_after_s", 2.0, "NO DATA after this long without a message", floating=(0.1, 3600.0), read_only=False
+        # a bad override is logged and the default used (ros_messages.declare_checked_parameter)
+        declare = partial(rm.declare_checked_parameter, self)
+        self._port = declare("port", DEFAULT_PORT, "TCP port of the page (0 = any free port)", (0, 65535))
+        self._bind = declare("bind", DEFAULT_BIND, "listen address; loopback unless set explicitly")
+        self._envelope_file = declare("envelope_file", "", "H-V envelope file ('' = the shipped envelope)")
+        self._airframe_name = declare("airframe", "", "airframe for rotor limits ('' = the envelope's)")
+        state_topic = declare("state_topic", rm.TOPIC_STATE, "nav_msgs/Odometry vehicle state topic")
+        rotor_topic = declare("rotor_topic", rm.TOPIC_ROTOR, "sensor_msgs/JointState rotor speed topic")
+        self._stale_after_s = declare(
+            "stale_after_s", 2.0, "NO DATA after this long without a message, s", (0.1, 3600.0), read_only=False
         )
-        self._max_update_rate_hz = self._declare(
-            "max_update_rate_hz", 25.0, "most frames per second sent to one page", floating=(1.0, 120.0)
+        self._max_update_rate_hz = declare(
+            "max_update_rate_hz", 25.0, "most frames per second sent to one page", (1.0, 120.0)
         )
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
@@ -635,24 +619,16 @@ class CockpitDisplay(Node):
         self._envelope_json = _to_json(envelope_data)
         self._plan_json = "null"
 
-        latched = QoSProfile(
-            history=HistoryPolicy.KEEP_LAST,
-            depth=1,
-            reliability=ReliabilityPolicy.RELIABLE,
-            durability=DurabilityPolicy.TRANSIENT_LOCAL,
-        )
-        # BEST_EFFORT matches reliable and best-effort publishers; depth 1: only the newest sample matters
-        sensor = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1, reliability=ReliabilityPolicy.BEST_EFFORT)
-        event = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        # the safety status and the plan are latched (msg_docs): a page opened after the failure shows the plan
+        # QoS as documented in msg_docs (ros_messages): the safety status and the plan are latched, so a page opened
+        # after the failure shows the plan; sensor streams with BEST_EFFORT, which matches any publisher
         for message_type, topic, callback, qos in (
-            (DiagnosticStatus, SAFETY_STATUS_TOPIC, self._on_safety_status, latched),
-            (Odometry, state_topic, self._on_state, sensor),
-            (JointState, rotor_topic, self._on_rotor, sensor),
-            (Header, FAILURE_EVENT_TOPIC, self._on_failure, event),
-            (JointTrajectory, TRAJECTORY_TOPIC, self._on_trajectory, latched),
-            (PathMsg, PATH_TOPIC, self._on_path, latched),
-            (DiagnosticStatus, PLAN_STATUS_TOPIC, self._on_plan_status, latched),
+            (DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, self._on_safety_status, rm.LATCHED_QOS),
+            (Odometry, state_topic, self._on_state, rm.SENSOR_QOS),
+            (JointState, rotor_topic, self._on_rotor, rm.SENSOR_QOS),
+            (Header, rm.TOPIC_FAILURE_EVENT, self._on_failure, rm.EVENT_QOS),
+            (JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, self._on_trajectory, rm.LATCHED_QOS),
+            (PathMsg, rm.TOPIC_LANDING_PATH, self._on_path, rm.LATCHED_QOS),
+            (DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan_status, rm.LATCHED_QOS),
         ):
             self.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
 
@@ -672,22 +648,6 @@ class CockpitDisplay(Node):
         self.get_logger().info(f"cockpit display at {self.url} (state from {state_topic})")
 
     # -- parameters ------------------------------------------------------------------------------------
-    def _declare(
-        self,
-        name: str,
-        default: Any,
-        description: str,
-        integer: tuple[int, int] | None = None,
-        floating: tuple[float, float] | None = None,
-        read_only: bool = True,
-    ) -> Any:
-        descriptor = ParameterDescriptor(description=description, read_only=read_only)
-        if integer is not None:
-            descriptor.integer_range = [IntegerRange(from_value=integer[0], to_value=integer[1], step=1)]
-        if floating is not None:
-            descriptor.floating_point_range = [FloatingPointRange(from_value=floating[0], to_value=floating[1])]
-        return self.declare_parameter(name, default, descriptor).value
-
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
         for parameter in parameters:
             if parameter.name == "stale_after_s":
@@ -783,7 +743,7 @@ class CockpitDisplay(Node):
             server.notify()
 
     def _on_safety_status(self, message: DiagnosticStatus) -> None:
-        values = _key_values(message.values)
+        values = rm.status_values(message)
         content = {
             "level": banner_level(message.level),
             "message": str(message.message),
@@ -799,10 +759,11 @@ class CockpitDisplay(Node):
         self._store(update)
 
     def _on_state(self, message: Odometry) -> None:
+        reading = rm.read_odometry(message)
         content = {
-            "height_m": _finite(message.pose.pose.position.z),
-            "speed_ms": _finite(message.twist.twist.linear.x),
-            "climb_ms": _finite(message.twist.twist.linear.z),
+            "height_m": _finite(reading.height),
+            "speed_ms": _finite(reading.forward_speed),
+            "climb_ms": _finite(reading.climb_rate),
         }
 
         def update(latest: _Latest, now: float) -> None:
@@ -811,10 +772,10 @@ class CockpitDisplay(Node):
         self._store(update)
 
     def _on_rotor(self, message: JointState) -> None:
-        names = list(message.name)
-        speed = None
-        if ROTOR_JOINT in names and len(message.velocity) == len(names):
-            speed = _finite(message.velocity[names.index(ROTOR_JOINT)])
+        try:
+            speed = _finite(rm.read_rotor(message).rotor_speed)
+        except ValueError:  # no main_rotor velocity: shown as "no main rotor speed"
+            speed = None
 
         def update(latest: _Latest, now: float) -> None:
             latest.rotor = _Received({"speed_rad_s": speed}, now)
@@ -822,7 +783,7 @@ class CockpitDisplay(Node):
         self._store(update)
 
     def _on_failure(self, message: Header) -> None:
-        failure_stamp = _seconds(message.stamp)
+        failure_stamp = rm.stamp_nanoseconds(message.stamp) * 1e-9
 
         def update(latest: _Latest, now: float) -> None:
             latest.failure = _Received({"stamp_s": failure_stamp}, now)

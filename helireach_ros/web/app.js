@@ -250,11 +250,18 @@
     $("touchdown-value").textContent = clock ? fmt(clock.time_to_touchdown_s, 1) : "---";
     view.plan.timeToTouchdown = clock ? clock.time_to_touchdown_s : null;
     const details = [];
-    if (status && isNum(status.time_to_land_s)) details.push(`plan ${fmt(status.time_to_land_s, 1)} s`);
-    if (status && isNum(status.solve_time_ms)) details.push(`solve ${fmt(status.solve_time_ms)} ms`);
-    if (status && isNum(status.value)) details.push(`value ${fmt(status.value, 3, true)}`);
-    if (status && status.message) details.push(status.message);
-    if (!status) details.push("no plan status");
+    if (status) {
+      if (isNum(status.replan_index) && status.replan_index > 0) details.push(`re-plan ${fmt(status.replan_index)}`);
+      if (isNum(status.solve_time_ms)) details.push(`solve ${fmt(status.solve_time_ms)} ms`);
+      if (status.message) {
+        details.push(status.message);
+      } else if (isNum(status.touchdown_descent_rate_ms) && isNum(status.touchdown_forward_speed_ms)) {
+        const rate = fmt(ft(status.touchdown_descent_rate_ms), 1);
+        details.push(`touchdown ${rate} ft/s, ${fmt(kt(status.touchdown_forward_speed_ms))} kt`);
+      }
+    } else {
+      details.push("no plan status");
+    }
     $("plan-detail").textContent = details.join(" \u00b7 ");
   }
 
@@ -314,7 +321,10 @@
     return 10 * power;
   }
 
+  let hatchTile = null;
+
   function hatchPattern(context) {
+    if (hatchTile) return context.createPattern(hatchTile, "repeat");
     const tile = document.createElement("canvas");
     tile.width = 10;
     tile.height = 10;
@@ -325,6 +335,7 @@
     tileContext.moveTo(0, 10);
     tileContext.lineTo(10, 0);
     tileContext.stroke();
+    hatchTile = tile;
     return context.createPattern(tile, "repeat");
   }
 
@@ -341,7 +352,7 @@
       context.moveTo(px, frame.top);
       context.lineTo(px, frame.bottom);
       context.stroke();
-      context.fillText(String(Math.round(x * 10) / 10), px, frame.bottom + 6);
+      context.fillText(String(Number(x.toFixed(3))), px, frame.bottom + 6);
     }
     context.textAlign = "right";
     context.textBaseline = "middle";
@@ -351,7 +362,7 @@
       context.moveTo(frame.left, py);
       context.lineTo(frame.right, py);
       context.stroke();
-      context.fillText(String(Math.round(y * 1000) / 1000), frame.left - 8, py);
+      context.fillText(String(Number(y.toFixed(3))), frame.left - 8, py);
     }
     context.strokeStyle = COLORS.axis;
     context.lineWidth = 2;
@@ -395,13 +406,13 @@
     context.beginPath();
     context.rect(frame.left, frame.top, frame.right - frame.left, frame.bottom - frame.top);
     context.clip();
-    if (envelope) drawEnvelope(context, frame, envelope, speedsKt, heightsFt, xMax, yMax);
+    if (envelope) drawEnvelope(context, frame, envelope, speedsKt, heightsFt);
     drawPlanPath(context, frame);
-    drawAircraft(context, frame, xMax, yMax);
     context.restore();
+    drawAircraft(context, frame, xMax, yMax); // unclipped: clamped to the axes, but never cut off
   }
 
-  function drawEnvelope(context, frame, envelope, speedsKt, heightsFt, xMax, yMax) {
+  function drawEnvelope(context, frame, envelope, speedsKt, heightsFt) {
     const hatch = hatchPattern(context);
     const codes = envelope.status;
     // Outside the grid is unknown, never safe.
@@ -483,6 +494,8 @@
   }
 
   function drawAircraft(context, frame, xMax, yMax) {
+    const clamp = (value, high) => Math.min(Math.max(value, 0), high);
+    const onAxes = (point) => [frame.x(clamp(point.speedKt, xMax)), frame.y(clamp(point.heightFt, yMax))];
     // trail: older points fainter
     const trail = model.trail;
     for (let index = 1; index < trail.length; index += 1) {
@@ -491,8 +504,8 @@
       context.strokeStyle = `rgba(53, 208, 255, ${alpha.toFixed(3)})`;
       context.lineWidth = 4;
       context.beginPath();
-      context.moveTo(frame.x(trail[index - 1].speedKt), frame.y(trail[index - 1].heightFt));
-      context.lineTo(frame.x(trail[index].speedKt), frame.y(trail[index].heightFt));
+      context.moveTo(...onAxes(trail[index - 1]));
+      context.lineTo(...onAxes(trail[index]));
       context.stroke();
     }
     const state = model.live && model.live.state;
@@ -503,8 +516,7 @@
     const speedKt = kt(state.speed_ms);
     const heightFt = ft(state.height_m);
     const offScale = speedKt < 0 || speedKt > xMax || heightFt < 0 || heightFt > yMax;
-    const x = frame.x(Math.min(Math.max(speedKt, 0), xMax));
-    const y = frame.y(Math.min(Math.max(heightFt, 0), yMax));
+    const [x, y] = onAxes({ speedKt, heightFt });
     const stale = state.stale || model.link !== "up";
     context.lineWidth = 3;
     context.strokeStyle = "#000";
@@ -658,7 +670,7 @@
         context.textAlign = "center";
         context.textBaseline = "top";
         const tStep = niceStep(lastTime, 6);
-        for (let t = 0; t <= lastTime + 1e-9; t += tStep) context.fillText(String(Math.round(t * 10) / 10), frame.x(t), frame.bottom + 4);
+        for (let t = 0; t <= lastTime + 1e-9; t += tStep) context.fillText(String(Number(t.toFixed(3))), frame.x(t), frame.bottom + 4);
         context.font = 'bold 13px "DejaVu Sans", Arial, sans-serif';
         if (!compact) context.fillText("TIME SINCE PLAN START (s)", (frame.left + frame.right) / 2, frame.bottom + 21);
       }
