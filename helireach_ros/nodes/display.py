@@ -811,19 +811,14 @@ class CockpitDisplay(Node):
         self._store(update)
 
     def _on_path(self, message: PathMsg) -> None:
-        section = path_section(message)
-
-        def update(latest: _Latest, now: float) -> None:
-            latest.path = _Received(section, now)
-            self._rebuild_plan(latest)
-
-        self._store(update)
+        self._store_plan_part("path", path_section(message))
 
     def _on_plan_status(self, message: DiagnosticStatus) -> None:
-        section = plan_status_section(message)
+        self._store_plan_part("plan_status", plan_status_section(message))
 
+    def _store_plan_part(self, part: str, section: dict[str, Any]) -> None:
         def update(latest: _Latest, now: float) -> None:
-            latest.plan_status = _Received(section, now)
+            setattr(latest, part, _Received(section, now))
             self._rebuild_plan(latest)
 
         self._store(update)
