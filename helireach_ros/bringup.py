@@ -13,17 +13,21 @@ SIGTERM and then finishes the log. Each node also has its own console script for
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import math
 import os
+import signal
+import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -48,6 +52,7 @@ __all__ = [
 DEFAULT_PARAMETERS = "nodes.yaml"
 """The node parameter file in ``config/``, loaded before the user's."""
 MIN_EXECUTOR_THREADS = 4
+_DRAIN_S = 0.3  # after a stop signal: run the callbacks already queued before finishing the log
 
 
 def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args: Sequence[str] = ()) -> list[str]:
@@ -73,6 +78,7 @@ class HelireachSystem:
     recorder: McapRecorder | None = None
     extra: list[Node] = field(default_factory=list)
     _closed: bool = False
+    _signals: list[int] = field(default_factory=list)
 
     @property
     def nodes(self) -> list[Node]:
@@ -89,18 +95,50 @@ class HelireachSystem:
         return self.recorder.log_path if self.recorder is not None else None
 
     def spin_until(self, condition: Callable[[], bool], timeout_s: float, step_s: float = 0.05) -> bool:
-        """Spins the executor until ``condition()`` holds or the timeout passes; returns the condition."""
+        """Spins until ``condition()`` holds, the timeout passes or a stop was requested; returns the condition."""
         deadline = time.monotonic() + timeout_s
-        while self.context.ok() and not condition():
+        while self.context.ok() and not self.stop_requested and not condition():
             remaining = deadline - time.monotonic()
             if remaining <= 0.0:
                 break
             self.executor.spin_once(timeout_sec=min(step_s, remaining))
         return condition()
 
-    def spin(self) -> None:
-        """Spins until the context shuts down (Ctrl-C/SIGTERM with the default context)."""
-        self.executor.spin()
+    @property
+    def stop_requested(self) -> bool:
+        """A SIGINT/SIGTERM arrived while :meth:`stop_on_signals` was active."""
+        return bool(self._signals)
+
+    @contextlib.contextmanager
+    def stop_on_signals(self) -> Iterator[None]:
+        """Within this block SIGINT and SIGTERM only request a stop (:attr:`stop_requested`).
+
+        rclpy's own handlers would shut the context down at once; this way the spinning code ends its
+        loop (the executor wakes at least every ``step_s``) and the log is drained and finished.
+        """
+        if threading.current_thread() is not threading.main_thread():
+            yield  # Python delivers signals to the main thread only
+            return
+        previous = {number: signal.getsignal(number) for number in (signal.SIGINT, signal.SIGTERM)}
+        for number in previous:
+            signal.signal(number, lambda number, _frame: self._signals.append(number))
+        try:
+            yield
+        finally:
+            for number, handler in previous.items():
+                signal.signal(number, handler)
+
+    def drain(self, duration_s: float = _DRAIN_S) -> None:
+        """Runs the callbacks already queued (e.g. the recorder's copy of the last plan) for a short while."""
+        deadline = time.monotonic() + duration_s
+        while self.context.ok() and time.monotonic() < deadline:
+            self.executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0.0)))
+
+    def spin_until_signal(self) -> None:
+        """Spins until SIGINT or SIGTERM (or the context shuts down), then drains."""
+        with self.stop_on_signals():
+            self.spin_until(lambda: False, math.inf, step_s=0.1)
+            self.drain()
 
     def shutdown(self) -> None:
         """Finishes the log, destroys the nodes, shuts the executor and context down; idempotent."""
@@ -153,7 +191,6 @@ def build_system(
     extra_nodes: Sequence[Callable[..., Node]] = (),
     context: Context | None = None,
     ros_args: Sequence[str] = (),
-    handle_signals: bool = False,
     num_threads: int | None = None,
     command: str = "helireach bringup",
 ) -> HelireachSystem:
@@ -168,13 +205,15 @@ def build_system(
         extra_nodes: factories called with the node options (``context=...``), e.g. the display class.
         context: a fresh context to initialise (default: a new one).
         ros_args: further ROS arguments (e.g. ``["-p", "helireach_planner:deadline:=0.1"]``).
-        handle_signals: install rclpy's SIGINT/SIGTERM handlers (the CLI does; tests do not).
         num_threads: executor threads (default: max(4, CPUs)).
         command: recorded in the log's metadata.
     """
     context = context if context is not None else Context()
-    options = SignalHandlerOptions.ALL if handle_signals else SignalHandlerOptions.NO
-    rclpy.init(args=ros_arguments(params_files, ros_args), context=context, signal_handler_options=options)
+    # No rclpy signal handlers: they would shut the context down before the log is drained and finished
+    # (HelireachSystem.spin_until_signal handles SIGINT/SIGTERM instead).
+    rclpy.init(
+        args=ros_arguments(params_files, ros_args), context=context, signal_handler_options=SignalHandlerOptions.NO
+    )
     created: list[Node] = []
     try:
         monitor = VehicleMonitor(context=context)
@@ -221,20 +260,12 @@ def run_bringup(
 ) -> int:
     """``helireach bringup``: runs the system until Ctrl-C or SIGTERM; returns the exit code."""
     system = build_system(
-        params_files,
-        with_sim=with_sim,
-        record=record,
-        log_dir=log_dir,
-        scenario=scenario,
-        extra_nodes=extra_nodes,
-        handle_signals=True,
+        params_files, with_sim=with_sim, record=record, log_dir=log_dir, scenario=scenario, extra_nodes=extra_nodes
     )
     if system.log_path is not None:
         print(f"helireach bringup: logging to {system.log_path}", flush=True)
     try:
-        system.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
+        system.spin_until_signal()
     finally:
         system.shutdown()
     if system.log_path is not None:

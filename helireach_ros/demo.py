@@ -17,6 +17,8 @@ Run: ``python -m helireach_ros.demo --out out [--hold] [--display] [--scenario N
 from __future__ import annotations
 
 import argparse
+import contextlib
+import math
 import os
 import sys
 import time
@@ -28,7 +30,6 @@ import numpy as np
 __all__ = ["DemoResult", "main", "run_demo"]
 
 _TOUCHDOWN_TIMEOUT_S = 120.0  # wall time from start; the demo scenario lands about 16 s in
-_SETTLE_S = 0.5  # after touchdown: let the recorder take the last messages
 
 
 class DemoResult:
@@ -94,38 +95,36 @@ def run_demo(
         scenario=scenario,
         extra_nodes=extra,
         context=context,
-        handle_signals=handle_signals,
         command="python -m helireach_ros.demo",
     )
     sim, planner, status = system.sim, system.planner, system.envelope_status
     assert sim is not None
     result.log_path, result.scenario = system.log_path, sim.scenario
-    result.limits, result.nominal_rotor_speed = (
-        sim.vehicle.airframe.limits,
-        sim.vehicle.nominal_airframe.nominal_rotor_speed,
-    )
+    result.limits = sim.vehicle.airframe.limits
+    result.nominal_rotor_speed = sim.vehicle.nominal_airframe.nominal_rotor_speed
+    signals = system.stop_on_signals() if handle_signals else contextlib.nullcontext()
     try:
-        started = time.monotonic()
+        with signals:
+            started = time.monotonic()
 
-        def cruising() -> bool:
-            verdict = status.verdict
-            if verdict is not None and sim.vehicle.phase == "cruise":
-                result.status_before_failure = (LEVEL_NAMES.get(verdict.level, "?"), verdict.message)
-            return sim.vehicle.phase != "cruise"
+            def cruising() -> bool:
+                verdict = status.verdict
+                if verdict is not None and sim.vehicle.phase == "cruise":
+                    result.status_before_failure = (LEVEL_NAMES.get(verdict.level, "?"), verdict.message)
+                return sim.vehicle.phase != "cruise"
 
-        system.spin_until(cruising, _TOUCHDOWN_TIMEOUT_S)
-        system.spin_until(lambda: sim.touchdown is not None, _TOUCHDOWN_TIMEOUT_S - (time.monotonic() - started))
-        system.spin_until(lambda: False, _SETTLE_S)
-        result.touchdown = sim.touchdown
-        result.plans = [record for record in planner.published_plans if record.failure_id == 1]
-        converged = [record for record in result.plans if not record.fallback]
-        result.first_plan = converged[0] if converged else (result.plans[0] if result.plans else None)
-        result.track = np.array([[state[3], state[1]] for _, state in sim.vehicle.history])
-        if hold and system.context.ok():
-            print("helireach demo: holding the nodes after touchdown; Ctrl-C to end", flush=True)
-            system.spin_until(lambda: False, float("inf"), step_s=0.2)
-    except KeyboardInterrupt:
-        pass
+            system.spin_until(cruising, _TOUCHDOWN_TIMEOUT_S)
+            remaining = _TOUCHDOWN_TIMEOUT_S - (time.monotonic() - started)
+            system.spin_until(lambda: sim.touchdown is not None, remaining)
+            system.drain()
+            result.touchdown = sim.touchdown
+            result.plans = [record for record in planner.published_plans if record.failure_id == 1]
+            converged = [record for record in result.plans if not record.fallback]
+            result.first_plan = converged[0] if converged else (result.plans[0] if result.plans else None)
+            result.track = np.array([[state[3], state[1]] for _, state in sim.vehicle.history])
+            if hold and not system.stop_requested:
+                print("helireach demo: holding the nodes after touchdown; Ctrl-C to end", flush=True)
+                system.spin_until(lambda: False, math.inf, step_s=0.1)
     finally:
         if system.recorder is not None:
             result.message_count = system.recorder.message_count
