@@ -257,10 +257,17 @@ def run_bringup(
     scenario: str | None = None,
     record: bool = True,
     extra_nodes: Sequence[Callable[..., Node]] = (),
+    ros_args: Sequence[str] = (),
 ) -> int:
     """``helireach bringup``: runs the system until Ctrl-C or SIGTERM; returns the exit code."""
     system = build_system(
-        params_files, with_sim=with_sim, record=record, log_dir=log_dir, scenario=scenario, extra_nodes=extra_nodes
+        params_files,
+        with_sim=with_sim,
+        record=record,
+        log_dir=log_dir,
+        scenario=scenario,
+        extra_nodes=extra_nodes,
+        ros_args=ros_args,
     )
     if system.log_path is not None:
         print(f"helireach bringup: logging to {system.log_path}", flush=True)

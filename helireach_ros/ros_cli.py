@@ -1,6 +1,7 @@
 """``helireach bringup`` and ``helireach replay``: the ROS system from the command line.
 
-* ``helireach bringup [--params-file F ...] [--with-sim] [--scenario S] [--log-dir D] [--no-record] [--display]``
+* ``helireach bringup [--params-file F ...] [--with-sim] [--scenario S] [--log-dir D] [--no-record] [--display]
+  [--ros-args ...]``
   runs the composed nodes (:mod:`helireach_ros.bringup`) until Ctrl-C or SIGTERM.
 * ``helireach replay LOG.mcap [--rate X] [--topics T ...]`` republishes a log with its original timing
   and QoS (:func:`helireach_ros.log_replay.replay_log`). To re-run the nodes against a recorded failure,
@@ -190,6 +191,7 @@ def _run_bringup(arguments: argparse.Namespace) -> int:
             scenario=arguments.scenario,
             record=not arguments.no_record,
             extra_nodes=extra,
+            ros_args=arguments.ros_args,
         )
     except (FileNotFoundError, ValueError) as error:
         print(f"helireach bringup: {error}", file=sys.stderr)
@@ -228,8 +230,10 @@ def _run_compare(arguments: argparse.Namespace) -> int:
     except (McapLogError, ValueError, OSError) as error:
         print(f"helireach replay --compare: {error}", file=sys.stderr)
         return 1
-    print(f"{'failure':>7} {'logged':>10} {'re-run':>10} {'T logged':>9} {'T re-run':>9} "
-          f"{'max dC_T':>9} {'max dtheta':>10}  result")  # fmt: skip
+    print(
+        f"{'failure':>7} {'logged':>10} {'re-run':>10} {'T logged':>9} {'T re-run':>9} "
+        f"{'max dC_T':>9} {'max dtheta':>10}  result"
+    )
     for comparison in comparisons:
         times = f"{comparison.logged_time_to_land:>8.3f}s {comparison.rerun_time_to_land:>8.3f}s"
         print(
@@ -263,6 +267,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bringup.add_argument("--log-dir", help="folder for the MCAP log (default: the recorder's log_dir parameter)")
     bringup.add_argument("--no-record", action="store_true", help="do not record an MCAP log")
     bringup.add_argument("--display", action="store_true", help="also run the cockpit display node")
+    bringup.add_argument(
+        "--ros-args",
+        nargs=argparse.REMAINDER,
+        default=[],
+        dest="ros_args",
+        help="ROS arguments for every node, e.g. --ros-args -p helireach_planner:deadline:=0.1 (must come last)",
+    )
     bringup.set_defaults(handler=_run_bringup)
 
     replay = subparsers.add_parser(

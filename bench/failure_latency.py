@@ -1,0 +1,228 @@
+"""Failure message → landing trajectory on the wire: p50/p95 over many failures at different states.
+
+Run: .venv/bin/python bench/failure_latency.py [--failures 40] [--mode both|composed|cross-process] [--seed 1]
+
+For each failure the bench streams a level-flight state (50 Hz odometry and rotor speed) at a seeded
+random (height, speed) over 50–800 ft × 0–115 kt (off the envelope grid, so the warm start is a
+neighbouring stored plan, not the same state), lets the planner receive it, then publishes the
+engine-failure flag and times, on this process's clock, from ``publish()`` to the arrival of the
+landing trajectory stamped with that state. The path is the product's: vehicle flag → monitor →
+failure event → planner (warm start from the envelope, IPOPT, independent replay) → trajectory → back.
+
+* ``composed``: monitor, envelope status, planner and MCAP recorder in this process under bringup's
+  multi-threaded executor; the bench's node shares the executor.
+* ``cross-process``: ``helireach bringup`` in a child process (LOCALHOST discovery, a random domain
+  id); the DDS transport is paid both ways.
+
+Closed-loop re-planning is off (``replan_period:=0``) so every failure starts from an idle planner, as
+a real failure would; the deadline stays at its default, and a flagged fallback published first is
+counted (and its own latency reported). Prints what it measured on this machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import random
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
+from nav_msgs.msg import Odometry
+from rclpy.context import Context
+from rclpy.executors import Executor, SingleThreadedExecutor
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Bool
+from trajectory_msgs.msg import JointTrajectory
+
+from helireach_ros import ros_messages as rm
+from helireach_ros.bringup import build_system
+from helireach_ros.units import FT, KT
+
+_NO_REPLANNING = ["-p", "helireach_planner:replan_period:=0.0"]
+_SETTLE_S = 0.15  # state streamed before each failure (the planner keeps only the latest)
+_TIMEOUT_S = 10.0
+
+
+class Vehicle:
+    """The bench's side: streams a state, raises the failure flag, receives trajectories and plan statuses."""
+
+    def __init__(self, context: Context, executor: Executor) -> None:
+        self.node = Node("bench_vehicle", context=context)
+        self.executor = executor
+        executor.add_node(self.node)
+        self.odometry = self.node.create_publisher(Odometry, rm.TOPIC_ODOMETRY, rm.STREAM_QOS)
+        self.rotor = self.node.create_publisher(JointState, rm.TOPIC_ROTOR, rm.STREAM_QOS)
+        self.failure = self.node.create_publisher(Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS)
+        self.arrivals: list[tuple[float, JointTrajectory]] = []
+        self.statuses: list[dict[str, str]] = []
+        self.node.create_subscription(
+            JointTrajectory,
+            rm.TOPIC_LANDING_TRAJECTORY,
+            lambda message: self.arrivals.append((time.perf_counter(), message)),
+            rm.STREAM_QOS,
+        )
+        self.node.create_subscription(
+            DiagnosticStatus,
+            rm.TOPIC_PLAN_STATUS,
+            lambda message: self.statuses.append(rm.status_values(message)),
+            rm.STREAM_QOS,
+        )
+        self.stamps: set[int] = set()
+        self.details: list[tuple[float, float, int]] = []  # (IPOPT ms, planner event->publish ms, iterations)
+
+    def spin_for(self, duration_s: float, state: tuple[float, float] | None = None) -> None:
+        """Spins, streaming ``state`` (height m, speed m/s) every 20 ms when given."""
+        deadline = time.perf_counter() + duration_s
+        while time.perf_counter() < deadline:
+            if state is not None:
+                stamp = self.node.get_clock().now().nanoseconds
+                self.stamps.add(stamp)
+                self.odometry.publish(rm.odometry_message(stamp, state[0], 0.0, state[1], 0.0))
+                self.rotor.publish(rm.rotor_message(stamp, 27.0))
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def wait_for_subscribers(self) -> None:
+        deadline = time.perf_counter() + 30.0
+        while self.failure.get_subscription_count() == 0 or self.odometry.get_subscription_count() == 0:
+            if time.perf_counter() > deadline:
+                raise RuntimeError("the monitor never subscribed (discovery failed?)")
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def fail(self, state: tuple[float, float]) -> tuple[float, float, bool]:
+        """One failure at a state: (ms to the first trajectory, ms to the first converged one, first was fallback)."""
+        self.stamps.clear()
+        self.spin_for(_SETTLE_S, state)
+        self.failure.publish(Bool(data=False))
+        self.arrivals.clear()
+        self.statuses.clear()
+        started = time.perf_counter()
+        self.failure.publish(Bool(data=True))
+        deadline = started + _TIMEOUT_S
+        # The planner publishes each trajectory right before its status: the k-th of each belong together.
+        while time.perf_counter() < deadline:
+            self.executor.spin_once(timeout_sec=0.005)
+            mine = [t for t, message in self.arrivals if rm.stamp_nanoseconds(message.header.stamp) in self.stamps]
+            kinds = [
+                values.get("fallback") == "true"
+                for values in self.statuses
+                if int(values.get("state_stamp_ns", -1)) in self.stamps
+            ]
+            converged = [k for k, fallback in enumerate(kinds) if not fallback and k < len(mine)]
+            if converged:
+                values = [v for v in self.statuses if int(v.get("state_stamp_ns", -1)) in self.stamps][converged[0]]
+                self.details.append(
+                    (float(values["solve_time_ms"]), float(values["latency_ms"]), int(values["iterations"]))
+                )
+                return 1e3 * (mine[0] - started), 1e3 * (mine[converged[0]] - started), kinds[0]
+        raise RuntimeError(f"no converged landing plan within {_TIMEOUT_S} s")
+
+
+def _states(count: int, seed: int) -> list[tuple[float, float]]:
+    generator = random.Random(seed)
+    return [(generator.uniform(50.0, 800.0) * FT, generator.uniform(0.0, 115.0) * KT) for _ in range(count)]
+
+
+def _run(vehicle: Vehicle, states: list[tuple[float, float]]) -> dict[str, list]:
+    vehicle.wait_for_subscribers()
+    vehicle.fail(states[0])  # not counted: discovery of the reverse path and first-call costs
+    vehicle.details.clear()
+    results: dict[str, list] = {"first": [], "converged": [], "fallback": []}
+    for state in states:
+        first, converged, fallback = vehicle.fail(state)
+        results["first"].append(first)
+        results["converged"].append(converged)
+        results["fallback"].append(fallback)
+    results["details"] = list(vehicle.details)
+    return results
+
+
+def run_composed(states: list[tuple[float, float]], log_dir: str) -> dict[str, list]:
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
+    system = build_system(log_dir=log_dir, ros_args=_NO_REPLANNING, context=Context())
+    try:
+        return _run(Vehicle(system.context, system.executor), states)
+    finally:
+        system.shutdown()
+
+
+def run_cross_process(states: list[tuple[float, float]], log_dir: str) -> dict[str, list]:
+    environment = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 200)))
+    os.environ.update(environment)
+    child = subprocess.Popen(
+        [sys.executable, "-m", "helireach_ros.cli", "bringup", "--log-dir", log_dir, "--ros-args", *_NO_REPLANNING],
+        env=environment,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    context = Context()
+    rclpy.init(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        line = child.stdout.readline()  # "logging to ...": the child's nodes exist
+        if "logging to" not in line:
+            raise RuntimeError(f"helireach bringup did not start: {line!r}")
+        return _run(Vehicle(context, executor), states)
+    finally:
+        child.terminate()
+        child.wait(timeout=30)
+        executor.shutdown()
+        rclpy.try_shutdown(context=context)
+
+
+def _report(name: str, results: dict[str, list]) -> None:
+    first = np.asarray(results["first"])
+    converged = np.asarray(results["converged"])
+    fallbacks = int(np.sum(results["fallback"]))
+    print(f"\n{name}: {len(first)} failures")
+    print(
+        f"  failure -> first trajectory    p50 {np.percentile(first, 50):6.1f} ms  p95 {np.percentile(first, 95):6.1f} "
+        f"ms  max {first.max():6.1f} ms  mean {first.mean():6.1f} ms"
+    )
+    print(
+        f"  failure -> converged plan      p50 {np.percentile(converged, 50):6.1f} ms  p95 "
+        f"{np.percentile(converged, 95):6.1f} ms  max {converged.max():6.1f} ms"
+    )
+    print(f"  first message was a flagged fallback (deadline missed): {fallbacks} of {len(first)}")
+    solve, planner, iterations = (np.asarray(column) for column in zip(*results["details"], strict=True))
+    print(
+        f"  of which IPOPT                 p50 {np.percentile(solve, 50):6.1f} ms  p95 {np.percentile(solve, 95):6.1f} "
+        f"ms  (iterations p50 {np.percentile(iterations, 50):.0f}, p95 {np.percentile(iterations, 95):.0f})"
+    )
+    print(
+        f"  planner event -> publish       p50 {np.percentile(planner, 50):6.1f} ms  p95 "
+        f"{np.percentile(planner, 95):6.1f} ms  (solve + replay + messages)"
+    )
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--failures", type=int, default=40, help="failures per mode (>= 30)")
+    parser.add_argument("--mode", choices=("both", "composed", "cross-process"), default="both")
+    parser.add_argument("--seed", type=int, default=1)
+    arguments = parser.parse_args()
+    states = _states(arguments.failures, arguments.seed)
+    print(
+        f"helireach failure latency: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
+        f"Python {platform.python_version()}, {arguments.failures} failures, seed {arguments.seed}"
+    )
+    with tempfile.TemporaryDirectory() as log_dir:
+        if arguments.mode in ("both", "composed"):
+            _report("composed (one process, multi-threaded executor)", run_composed(states, log_dir))
+        if arguments.mode in ("both", "cross-process"):
+            _report("cross-process (helireach bringup in a child process)", run_cross_process(states, log_dir))
+    print(
+        f"\nstates: {Path(__file__).name} --seed {arguments.seed}: 50-800 ft x 0-115 kt, level flight, total power loss"
+    )
+
+
+if __name__ == "__main__":
+    main()
