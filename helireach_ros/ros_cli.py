@@ -199,27 +199,14 @@ def _run_bringup(arguments: argparse.Namespace) -> int:
 
 
 def _run_replay(arguments: argparse.Namespace) -> int:
-    from helireach_ros.mcap_log import McapLogError
-
     if arguments.compare:
         return _run_compare(arguments)
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
+    from helireach_ros.log_replay import main as replay_main
 
-    from helireach_ros.log_replay import replay_log
-
-    rclpy.init(args=["helireach", "--ros-args", "--"])
-    try:
-        count = replay_log(arguments.log, rate=arguments.rate, topics=arguments.topics)
-        print(f"replayed {count} messages from {arguments.log}")
-        return 0
-    except McapLogError as error:
-        print(f"helireach replay: {error}", file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 130
-    finally:
-        rclpy.try_shutdown()
+    argv = [arguments.log, "--rate", repr(arguments.rate)]
+    if arguments.topics:
+        argv += ["--topics", *arguments.topics]
+    return replay_main(argv)
 
 
 def _run_compare(arguments: argparse.Namespace) -> int:

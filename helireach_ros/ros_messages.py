@@ -21,7 +21,7 @@ Conventions (REP-103, SI on the wire; see ``msg_docs/`` for each topic):
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, NamedTuple
 
@@ -84,6 +84,7 @@ __all__ = [
     "read_rotor",
     "read_trajectory",
     "rotor_message",
+    "run_node",
     "stamp_message",
     "stamp_nanoseconds",
     "state_problems",
@@ -494,3 +495,29 @@ def declare_checked_parameter(
     except ParameterException as error:
         node.get_logger().error(f"parameter {name!r} rejected ({error}); using the default {default!r}")
         return node.declare_parameter(name, default, descriptor, ignore_override=True).value
+
+
+def run_node(node_class: Callable[[], Node], args: list[str] | None = None, multi_threaded: bool = False) -> None:
+    """The body of a node's ``main``: init, spin until Ctrl-C or SIGTERM, destroy, shut down (ros2/demos style).
+
+    Args:
+        node_class: builds the node (called after ``rclpy.init``).
+        args: command-line arguments (default ``sys.argv``).
+        multi_threaded: spin a ``MultiThreadedExecutor`` (for nodes with a separate callback group).
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = node_class()
+        executor = MultiThreadedExecutor() if multi_threaded else SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -27,11 +27,9 @@ from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
@@ -235,17 +233,7 @@ class EnvelopeStatusNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the envelope status node until Ctrl-C or SIGTERM."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = EnvelopeStatusNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    rm.run_node(EnvelopeStatusNode, args)
 
 
 if __name__ == "__main__":

@@ -17,10 +17,8 @@ import threading
 from functools import partial
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
@@ -196,17 +194,7 @@ class VehicleMonitor(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the monitor until Ctrl-C or SIGTERM."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = VehicleMonitor()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    rm.run_node(VehicleMonitor, args)
 
 
 if __name__ == "__main__":

@@ -36,12 +36,10 @@ from functools import partial
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -580,21 +578,7 @@ class LandingPlannerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the planner node (multi-threaded executor) until Ctrl-C or SIGTERM."""
-    from rclpy.executors import MultiThreadedExecutor
-
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = LandingPlannerNode()
-        executor = MultiThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    rm.run_node(LandingPlannerNode, args, multi_threaded=True)
 
 
 if __name__ == "__main__":
