@@ -2,8 +2,8 @@
 
 In-process tests isolate DDS with ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF`` and run the ROS executor on a
 background thread while the test drives the browser; every wait is "poll until a condition holds, with a
-deadline". The cross-process test (the ``helireach display`` command) uses ``LOCALHOST`` and a random
-``ROS_DOMAIN_ID``. Screenshots go to the test's tmp dir, and to ``$HELIREACH_ARTIFACTS/`` when that is set.
+deadline". The cross-process test (the ``helireach display`` command) uses ``LOCALHOST`` and its own
+``ROS_DOMAIN_ID`` (conftest.py). Screenshots go to the test's tmp dir, and to ``$HELIREACH_ARTIFACTS/`` when that is set.
 Browser tests are skipped only when no Chromium binary exists (install Debian's: ``apt-get install chromium``).
 """
 
@@ -14,7 +14,6 @@ import base64
 import json
 import math
 import os
-import random
 import shutil
 import signal
 import socket
@@ -386,9 +385,8 @@ class RosHarness:
 
 
 @pytest.fixture(autouse=True)
-def isolated_dds(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 200)))
+def isolated_dds(no_ros_discovery: None) -> None:
+    """Every test here runs without discovery unless it asks for a LOCALHOST domain."""
 
 
 # ------------------------------------------------------------------------------------------------------------
@@ -634,10 +632,8 @@ class StatusOnlyPublisher(Node):
 
 @needs_chromium
 def test_display_command_link_quiet_hold_and_lost(
-    browser: Browser, envelope_file: Path, monkeypatch: pytest.MonkeyPatch
+    browser: Browser, envelope_file: Path, localhost_ros_domain: int
 ) -> None:
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 200)))
     command = [sys.executable, "-m", "helireach_ros.cli", "display", "--port", "0", "--stale-after", "2"]
     command += ["--envelope", str(envelope_file), "--hold"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=REPO)

@@ -1,14 +1,13 @@
 """MCAP flight logs: writer/reader, recorder node, replay — with real rclpy, mcap and rosbags.
 
 In-process tests isolate DDS with ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF``; cross-process tests use
-``LOCALHOST`` and a random ``ROS_DOMAIN_ID``. Waiting is always "spin/poll until a condition holds,
+``LOCALHOST`` and a ``ROS_DOMAIN_ID`` of its own (conftest.py). Waiting is always "spin/poll until a condition holds,
 with a deadline".
 """
 
 from __future__ import annotations
 
 import os
-import random
 import re
 import shutil
 import signal
@@ -118,11 +117,8 @@ def ros_context(monkeypatch: pytest.MonkeyPatch) -> Iterator[Context]:
 
 
 @pytest.fixture
-def cross_process_env(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
+def cross_process_env(localhost_ros_domain: int) -> dict[str, str]:
     """Environment shared by this process and the recorder subprocess (localhost, own domain)."""
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(100 + random.randint(0, 100)))
-    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(REPO), env.get("PYTHONPATH", "")]))
     return env

@@ -1,0 +1,38 @@
+"""Shared test fixtures: ROS 2 discovery isolation.
+
+In-process tests turn discovery off; cross-process tests use LOCALHOST discovery on a domain id
+that no other test of this run uses, spread by process id so that concurrent runs on one machine
+are unlikely to meet (a meeting shows up as foreign messages, never as a silent pass).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+
+import pytest
+
+_NEXT_DOMAIN = itertools.count()
+_DOMAIN_COUNT = 200  # ids 1..200 are valid for every RMW on Linux
+
+
+def next_domain_id() -> int:
+    """A ROS_DOMAIN_ID in 1..200, different for each call within this test run."""
+    return 1 + (os.getpid() * 37 + next(_NEXT_DOMAIN)) % _DOMAIN_COUNT
+
+
+@pytest.fixture
+def localhost_ros_domain(monkeypatch: pytest.MonkeyPatch) -> int:
+    """LOCALHOST discovery on a domain of this test's own (this process and its children)."""
+    domain_id = next_domain_id()
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
+    return domain_id
+
+
+@pytest.fixture
+def no_ros_discovery(monkeypatch: pytest.MonkeyPatch) -> None:
+    """No discovery beyond this process (same-process delivery still works)."""
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(next_domain_id()))
