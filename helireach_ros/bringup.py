@@ -172,6 +172,9 @@ def _recorder_metadata(system_nodes: Mapping[str, Node | None], command: str) ->
         "airframe": getattr(getattr(planner, "airframe", None), "name", "unknown"),
         "airframe_digest": planner.airframe.digest() if getattr(planner, "planner", None) is not None else "",
         "envelope_id": status.envelope.envelope_id if status.envelope is not None else "",
+        "planner_ground_clearance_m": repr(planner.planning_airframe.limits.ground_clearance)
+        if getattr(planner, "planner", None) is not None
+        else "",
         "planner_settings": json.dumps(dataclasses.asdict(planner.settings), sort_keys=True)
         if getattr(planner, "planner", None) is not None
         else "",

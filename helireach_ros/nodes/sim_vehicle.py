@@ -84,7 +84,7 @@ class SimVehicleNode(Node):
         super().__init__("helireach_sim_vehicle", **node_options)
         declare = partial(rm.declare_checked_parameter, self)
         scenario_name = declare("scenario", "demo_500ft_75kt", "scenario name (config/scenarios) or file")
-        publish_period = declare("publish_period", 0.02, "sensor publishing (and integration) period, s", (1e-3, 1.0))
+        publish_period = declare("publish_period", 0.04, "sensor publishing (and integration) period, s", (1e-3, 1.0))
         self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "odometry frame")
         self._body_frame = declare("body_frame", rm.DEFAULT_BODY_FRAME, "vehicle frame (gravity/heading aligned)")
         self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "rotor joint name")
