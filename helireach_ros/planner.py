@@ -137,7 +137,7 @@ class LandingPlan:
             "replay": {
                 "value": self.replay.value,
                 "lands_within_limits": self.replay.lands_within_limits,
-                "ground_violation_time_s": self.replay.ground_violation_time,
+                "ground_contact_time_s": self.replay.ground_contact_time,
                 "rotor_speed_within_limits": self.replay.rotor_speed_within_limits,
                 "max_deviation": self.replay.max_deviation,
             },

@@ -6,8 +6,9 @@ of unsafe-in-replay states safe). This module integrates the model from the init
 plan's control function using CVODES (adaptive Adams, tight tolerances), a method that shares
 nothing with the collocation scheme but the model, and judges the landing on that trajectory:
 
-* the path ends at the plan's landing time, or earlier where it first goes below the ground
-  clearance (a crash does not continue underground);
+* the path ends at the plan's landing time, or earlier where it meets h = −ground_clearance (the
+  ground: a real vehicle does not continue below it); the state at that crossing, interpolated
+  between the dense samples that straddle it, is part of the path;
 * the replayed value is the smallest J along the path up to that end (sampled densely);
 * the landing is within limits when that value is ≤ 0 and the rotor speed stayed within its
   true limits until then (the NLP keeps a back-off from them at its nodes).
@@ -39,10 +40,11 @@ class ReplaySummary:
 
     Attributes:
         value: the smallest J along the replayed path (≤ 0: a safe touchdown happened).
-        lands_within_limits: value ≤ 0, no ground violation before it, rotor speed within limits.
+        lands_within_limits: value ≤ 0 and the rotor speed within its limits up to that moment.
         touchdown_time: time of the best touchdown moment (argmin of J), s.
         touchdown_state: the replayed state then (SI).
-        ground_violation_time: first time the path went below −ground_clearance, or None.
+        ground_contact_time: when the path met h = −ground_clearance (interpolated), or None if it
+            had not by the plan's landing time; the replayed path (``times``, ``states``) ends there.
         rotor_speed_within_limits: Ω stayed within its limits (± margin) up to touchdown.
         max_deviation: per state, the largest |replay − plan| at the plan's nodes (SI).
         times: the dense replay times, s.
@@ -53,7 +55,7 @@ class ReplaySummary:
     lands_within_limits: bool
     touchdown_time: float
     touchdown_state: np.ndarray
-    ground_violation_time: float | None
+    ground_contact_time: float | None
     rotor_speed_within_limits: bool
     max_deviation: dict[str, float]
     times: np.ndarray
@@ -152,9 +154,21 @@ def replay_plan(
     states_array = np.asarray(states).T
 
     below = np.flatnonzero(states_array[3] < -clearance)
-    ground_violation_time = float(times_array[below[0]]) if below.size else None
-    end = below[0] if below.size else len(times_array)
-    costs = terminal_cost(airframe, states_array[:, :end]) if end > 0 else np.array([np.inf])
+    ground_contact_time = None
+    if below.size:
+        # The path ends where it meets the ground; the state at that crossing, interpolated between the
+        # samples that straddle it, is the touchdown and is judged with the samples before it.
+        first = int(below[0])
+        if first > 0:
+            before, after = states_array[:, first - 1], states_array[:, first]
+            fraction = (before[3] + clearance) / (before[3] - after[3])
+            contact_time = times_array[first - 1] + fraction * (times_array[first] - times_array[first - 1])
+            times_array = np.append(times_array[:first], contact_time)
+            states_array = np.column_stack([states_array[:, :first], before + fraction * (after - before)])
+        else:  # started below the ground: nothing to fly
+            times_array, states_array = times_array[:1], states_array[:, :1]
+        ground_contact_time = float(times_array[-1])
+    costs = terminal_cost(airframe, states_array)
     best = int(np.argmin(costs))
     value = float(costs[best])
 
@@ -171,7 +185,7 @@ def replay_plan(
         lands_within_limits=bool(value <= 0.0 and rotor_ok and np.isfinite(value)),
         touchdown_time=float(times_array[best]),
         touchdown_state=states_array[:, best].copy(),
-        ground_violation_time=ground_violation_time,
+        ground_contact_time=ground_contact_time,
         rotor_speed_within_limits=rotor_ok,
         max_deviation=deviation,
         times=times_array,

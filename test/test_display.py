@@ -3,7 +3,8 @@
 In-process tests isolate DDS with ``ROS_AUTOMATIC_DISCOVERY_RANGE=OFF`` and run the ROS executor on a
 background thread while the test drives the browser; every wait is "poll until a condition holds, with a
 deadline". The cross-process test (the ``helireach display`` command) uses ``LOCALHOST`` and its own
-``ROS_DOMAIN_ID`` (conftest.py). Screenshots go to the test's tmp dir, and to ``$HELIREACH_ARTIFACTS/`` when that is set.
+``ROS_DOMAIN_ID`` (conftest.py). Screenshots go to the test's tmp dir, and to ``$HELIREACH_ARTIFACTS/``
+when that is set.
 Browser tests are skipped only when no Chromium binary exists (install Debian's: ``apt-get install chromium``).
 """
 
