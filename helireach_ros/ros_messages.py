@@ -32,6 +32,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Quaternion
 from nav_msgs.msg import Odometry, Path
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -48,6 +49,8 @@ __all__ = [
     "EVENT_QOS",
     "LATCHED_QOS",
     "LEVEL_NAMES",
+    "NO_QOS_EVENTS_PUBLISHER",
+    "NO_QOS_EVENTS_SUBSCRIPTION",
     "PITCH_JOINT",
     "ROTOR_JOINT",
     "SENSOR_QOS",
@@ -136,6 +139,16 @@ SENSOR_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 """What the nodes *subscribe* to sensor streams with: matches reliable and best-effort publishers."""
+
+
+# rclpy gives every publisher and subscription a QoS-event handler by default (it logs incompatible QoS); each
+# one is a waitable the executor re-adds to its wait set on every wait, which in a composed process with a
+# 25 Hz vehicle doubled the CPU time of the demo. The helireach nodes do without: a QoS mismatch shows as
+# silence (STALE), and the documented QoS is checked by the topic-contract test.
+NO_QOS_EVENTS_PUBLISHER = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
+"""``create_publisher`` keyword arguments: no QoS-event handler."""
+NO_QOS_EVENTS_SUBSCRIPTION = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
+"""``create_subscription`` keyword arguments: no QoS-event handler."""
 
 
 @dataclass(frozen=True)

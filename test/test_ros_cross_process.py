@@ -72,20 +72,25 @@ def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_l
     failure = node.create_publisher(Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS)
     stamps: list[int] = []
 
+    engine_failed = Bool(data=False)
+
     def fly_until(condition, timeout_s: float = TIMEOUT_S) -> bool:
+        """Publishes like a vehicle (state and failure flag every 20 ms) until the condition holds."""
         deadline = time.monotonic() + timeout_s
         while not condition() and time.monotonic() < deadline:
             stamps.append(node.get_clock().now().nanoseconds)
             odometry.publish(rm.odometry_message(stamps[-1], 500 * FT, 0.0, 75 * KT, 0.0))
             rotor.publish(rm.rotor_message(stamps[-1], 27.0))
+            failure.publish(engine_failed)
             executor.spin_once(timeout_sec=0.02)
         return condition()
 
     try:
         log_path = Path(wait_for_line(process, "helireach bringup: logging to", TIMEOUT_S).split(" to ", 1)[1].strip())
         assert fly_until(lambda: statuses and statuses[-1].level == DiagnosticStatus.OK), "no SAFE status"
-        assert fly_until(lambda: failure.get_subscription_count() > 0), "the monitor never subscribed"
-        failure.publish(Bool(data=True))
+        # Monitor and recorder both subscribed: the rising edge reaches the planner and the log.
+        assert fly_until(lambda: failure.get_subscription_count() >= 2), "monitor or recorder never subscribed"
+        engine_failed.data = True
         assert fly_until(lambda: bool(trajectories)), "no landing trajectory"
         assert rm.stamp_nanoseconds(trajectories[0].header.stamp) in stamps
         process.send_signal(signal.SIGTERM)

@@ -131,12 +131,18 @@ class EnvelopeStatusNode(Node):
         self._last_published: tuple[bytes, str] | None = None
         self._last_verdict: SafetyVerdict | None = None
 
-        self._status_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, rm.LATCHED_QOS)
-        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
+        self._status_publisher = self.create_publisher(
+            DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
         self._load_envelope(envelope_file)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
+        self.create_subscription(
+            Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
+        )
         self.create_timer(publish_period, self._publish_steady)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
         self._publish(force=True)

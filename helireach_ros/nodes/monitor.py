@@ -83,13 +83,27 @@ class VehicleMonitor(Node):
         self._engine_failed: bool | None = None
         self._vehicle_frame = rm.DEFAULT_BODY_FRAME
 
-        self._state_publisher = self.create_publisher(Odometry, rm.TOPIC_STATE, rm.STREAM_QOS)
-        self._rotor_publisher = self.create_publisher(JointState, rm.TOPIC_ROTOR_STATE, rm.STREAM_QOS)
-        self._event_publisher = self.create_publisher(Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS)
-        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
-        self.create_subscription(Odometry, rm.TOPIC_ODOMETRY, self._on_odometry, rm.SENSOR_QOS)
-        self.create_subscription(JointState, rm.TOPIC_ROTOR, self._on_rotor, rm.SENSOR_QOS)
-        self.create_subscription(Bool, rm.TOPIC_ENGINE_FAILURE, self._on_failure_flag, rm.EVENT_QOS)
+        self._state_publisher = self.create_publisher(
+            Odometry, rm.TOPIC_STATE, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._rotor_publisher = self.create_publisher(
+            JointState, rm.TOPIC_ROTOR_STATE, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._event_publisher = self.create_publisher(
+            Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self.create_subscription(
+            Odometry, rm.TOPIC_ODOMETRY, self._on_odometry, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
+        )
+        self.create_subscription(
+            JointState, rm.TOPIC_ROTOR, self._on_rotor, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
+        )
+        self.create_subscription(
+            Bool, rm.TOPIC_ENGINE_FAILURE, self._on_failure_flag, rm.EVENT_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
+        )
         self.create_timer(diagnostics_period, self._publish_diagnostics)
 
     # -- inputs ------------------------------------------------------------------------------------------------

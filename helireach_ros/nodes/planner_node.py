@@ -162,14 +162,31 @@ class LandingPlannerNode(Node):
 
         self._solver_group = MutuallyExclusiveCallbackGroup()
         self._deadline_group = MutuallyExclusiveCallbackGroup()
-        self._trajectory_publisher = self.create_publisher(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, rm.LATCHED_QOS)
-        self._path_publisher = self.create_publisher(PathMsg, rm.TOPIC_LANDING_PATH, rm.LATCHED_QOS)
-        self._status_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_PLAN_STATUS, rm.LATCHED_QOS)
-        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
-        self.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
-        self.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
+        self._trajectory_publisher = self.create_publisher(
+            JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._path_publisher = self.create_publisher(
+            PathMsg, rm.TOPIC_LANDING_PATH, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._status_publisher = self.create_publisher(
+            DiagnosticStatus, rm.TOPIC_PLAN_STATUS, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
         self.create_subscription(
-            Header, rm.TOPIC_FAILURE_EVENT, self._on_failure_event, rm.EVENT_QOS, callback_group=self._solver_group
+            Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
+        )
+        self.create_subscription(
+            JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
+        )
+        self.create_subscription(
+            Header,
+            rm.TOPIC_FAILURE_EVENT,
+            self._on_failure_event,
+            rm.EVENT_QOS,
+            callback_group=self._solver_group,
+            **rm.NO_QOS_EVENTS_SUBSCRIPTION,
         )
         self._deadline_timer = self.create_timer(
             self._deadline, self._on_deadline, callback_group=self._deadline_group, autostart=False

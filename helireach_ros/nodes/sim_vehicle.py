@@ -100,12 +100,28 @@ class SimVehicleNode(Node):
         self._reported = False
         self.touchdown_message: DiagnosticStatus | None = None
 
-        self._odometry_publisher = self.create_publisher(Odometry, rm.TOPIC_ODOMETRY, rm.STREAM_QOS)
-        self._rotor_publisher = self.create_publisher(JointState, rm.TOPIC_ROTOR, rm.STREAM_QOS)
-        self._failure_publisher = self.create_publisher(Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS)
-        self._touchdown_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_TOUCHDOWN, rm.LATCHED_QOS)
-        self._diagnostics_publisher = self.create_publisher(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
-        self.create_subscription(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, self._on_trajectory, _TRAJECTORY_QOS)
+        self._odometry_publisher = self.create_publisher(
+            Odometry, rm.TOPIC_ODOMETRY, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._rotor_publisher = self.create_publisher(
+            JointState, rm.TOPIC_ROTOR, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._failure_publisher = self.create_publisher(
+            Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._touchdown_publisher = self.create_publisher(
+            DiagnosticStatus, rm.TOPIC_TOUCHDOWN, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._diagnostics_publisher = self.create_publisher(
+            DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self.create_subscription(
+            JointTrajectory,
+            rm.TOPIC_LANDING_TRAJECTORY,
+            self._on_trajectory,
+            _TRAJECTORY_QOS,
+            **rm.NO_QOS_EVENTS_SUBSCRIPTION,
+        )
         self.create_timer(publish_period, self._step)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
         scenario = self.scenario
