@@ -65,6 +65,21 @@ def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args:
     return [*arguments, *ros_args, "--"]
 
 
+class _JoiningMultiThreadedExecutor(MultiThreadedExecutor):
+    """A MultiThreadedExecutor whose shutdown also waits for callbacks still running in its thread pool.
+
+    rclpy 7.1's ``shutdown`` returns while pool threads may still run callbacks; destroying the nodes
+    then makes those callbacks fail ("cannot use Destroyable because destruction was requested").
+    """
+
+    def shutdown(self, timeout_sec: float | None = None) -> bool:
+        done = super().shutdown(timeout_sec)
+        pool = getattr(self, "_executor", None)  # the ThreadPoolExecutor (not public API)
+        if pool is not None:
+            pool.shutdown(wait=True)
+        return done
+
+
 @dataclass
 class HelireachSystem:
     """The composed nodes, their executor and context."""
@@ -246,7 +261,7 @@ def build_system(
         rclpy.try_shutdown(context=context)
         raise
     threads = num_threads if num_threads is not None else max(MIN_EXECUTOR_THREADS, os.cpu_count() or 1)
-    executor = MultiThreadedExecutor(num_threads=threads, context=context)
+    executor = _JoiningMultiThreadedExecutor(num_threads=threads, context=context)
     system = HelireachSystem(context, executor, monitor, envelope_status, planner, sim, recorder, extra)
     for node in system.nodes:
         executor.add_node(node)
