@@ -44,6 +44,7 @@ __all__ = [
     "DEFAULT_PARAMETERS",
     "MIN_EXECUTOR_THREADS",
     "HelireachSystem",
+    "JoiningMultiThreadedExecutor",
     "build_system",
     "ros_arguments",
     "run_bringup",
@@ -65,7 +66,7 @@ def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args:
     return [*arguments, *ros_args, "--"]
 
 
-class _JoiningMultiThreadedExecutor(MultiThreadedExecutor):
+class JoiningMultiThreadedExecutor(MultiThreadedExecutor):
     """A MultiThreadedExecutor whose shutdown also waits for callbacks still running in its thread pool.
 
     rclpy 7.1's ``shutdown`` returns while pool threads may still run callbacks; destroying the nodes
@@ -187,9 +188,6 @@ def _recorder_metadata(system_nodes: Mapping[str, Node | None], command: str) ->
         "airframe": getattr(getattr(planner, "airframe", None), "name", "unknown"),
         "airframe_digest": planner.airframe.digest() if getattr(planner, "planner", None) is not None else "",
         "envelope_id": status.envelope.envelope_id if status.envelope is not None else "",
-        "planner_ground_clearance_m": repr(planner.planning_airframe.limits.ground_clearance)
-        if getattr(planner, "planner", None) is not None
-        else "",
         "planner_settings": json.dumps(dataclasses.asdict(planner.settings), sort_keys=True)
         if getattr(planner, "planner", None) is not None
         else "",
@@ -261,7 +259,7 @@ def build_system(
         rclpy.try_shutdown(context=context)
         raise
     threads = num_threads if num_threads is not None else max(MIN_EXECUTOR_THREADS, os.cpu_count() or 1)
-    executor = _JoiningMultiThreadedExecutor(num_threads=threads, context=context)
+    executor = JoiningMultiThreadedExecutor(num_threads=threads, context=context)
     system = HelireachSystem(context, executor, monitor, envelope_status, planner, sim, recorder, extra)
     for node in system.nodes:
         executor.add_node(node)

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import sys
@@ -129,11 +128,7 @@ def compare_logged_plans(
     if recorded.get("airframe_digest") and recorded["airframe_digest"] != airframe.digest():
         raise ValueError(f"{path}: airframe {airframe.name!r} differs from the logged one (digest)")
     settings = PlannerSettings(**json.loads(recorded["planner_settings"]))
-    clearance = float(recorded.get("planner_ground_clearance_m") or airframe.limits.ground_clearance)
-    planning_airframe = dataclasses.replace(
-        airframe, limits=dataclasses.replace(airframe.limits, ground_clearance=clearance)
-    )
-    planner = get_planner(planning_airframe, settings)
+    planner = get_planner(airframe, settings)
     try:
         envelope = load_envelope(default_envelope_path(), airframe, settings, 0.0)
     except Exception:

@@ -1,20 +1,18 @@
 """Across processes: ``helireach bringup`` in a child process, the vehicle in this one; SIGTERM ends a complete log.
 
-Discovery is LOCALHOST with a random per-test ROS_DOMAIN_ID; timeouts are generous (discovery takes
+Discovery is LOCALHOST on a domain id of the test's own (conftest); timeouts are generous (discovery takes
 up to a few seconds here, and the child builds the NLP before it spins).
 """
 
 from __future__ import annotations
 
 import os
-import random
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
@@ -32,13 +30,6 @@ from helireach_ros.units import FT, KT
 TIMEOUT_S = 40.0
 
 
-@pytest.fixture
-def ros_environment(monkeypatch: pytest.MonkeyPatch) -> dict[str, str]:
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    monkeypatch.setenv("ROS_DOMAIN_ID", str(random.randint(1, 200)))
-    return dict(os.environ)
-
-
 def wait_for_line(process: subprocess.Popen, prefix: str, timeout_s: float) -> str:
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -50,13 +41,15 @@ def wait_for_line(process: subprocess.Popen, prefix: str, timeout_s: float) -> s
     raise AssertionError(f"no line starting with {prefix!r} from the child (exit code {process.poll()})")
 
 
-def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_log(ros_environment, tmp_path) -> None:
+def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_log(
+    localhost_ros_domain, tmp_path
+) -> None:
     process = subprocess.Popen(
         [sys.executable, "-m", "helireach_ros.cli", "bringup", "--log-dir", str(tmp_path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
-        env=ros_environment,
+        env=dict(os.environ),
     )
     context = Context()
     rclpy.init(context=context)

@@ -18,7 +18,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -27,7 +26,7 @@ from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import ros_messages as rm
-from helireach_ros.bringup import build_system, ros_arguments
+from helireach_ros.bringup import JoiningMultiThreadedExecutor, build_system, ros_arguments
 from helireach_ros.envelope import default_envelope_path, load_envelope
 from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.nodes.monitor import VehicleMonitor
@@ -39,8 +38,7 @@ OMEGA0 = 27.0  # uh60a_class nominal rotor speed, rad/s (only used as a plausibl
 
 
 @pytest.fixture
-def context(monkeypatch: pytest.MonkeyPatch):
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+def context(no_ros_discovery):
     fresh = Context()
     rclpy.init(context=fresh, args=ros_arguments())
     yield fresh
@@ -59,7 +57,7 @@ class Harness:
         self.context = context
         self.nodes = list(nodes)
         self.probe = Node("test_probe", context=context)
-        self.executor = MultiThreadedExecutor(num_threads=4, context=context)
+        self.executor = JoiningMultiThreadedExecutor(num_threads=4, context=context)
         for node in [*self.nodes, self.probe]:
             self.executor.add_node(node)
         self.received: dict[str, list[Any]] = {}
@@ -129,8 +127,7 @@ def find_state(envelope, predicate: Callable[[Any], bool]) -> tuple[float, float
 
 
 # --- topic contract -----------------------------------------------------------------------------------------
-def test_every_topic_has_its_documented_type_and_qos(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
+def test_every_topic_has_its_documented_type_and_qos(no_ros_discovery) -> None:
     system = build_system(with_sim=True, record=False, context=Context())
     try:
         probe = system.monitor

@@ -114,18 +114,14 @@ def test_noise_is_seeded(airframe) -> None:
 
 
 def follow_one_plan(scenario, airframe, settings) -> SimulatedVehicle:
-    """Flies the scenario with the plan made at the failure and nothing else (no re-planning).
-
-    The plan is made as the planner node makes it: the path held at or above the ground.
-    """
+    """Flies the scenario with the plan made at the failure and nothing else (no re-planning)."""
     vehicle = SimulatedVehicle(scenario, airframe, settings)
-    planning = dataclasses.replace(airframe, limits=dataclasses.replace(airframe.limits, ground_clearance=0.0))
     vehicle.advance(scenario.failure_time)
     measured = vehicle.measure()
     state = np.array(
         [-measured.climb_rate, measured.forward_speed, measured.rotor_speed, measured.height, measured.distance, 0.0]
     )
-    plan = plan_landing(state, planning, settings)
+    plan = plan_landing(state, airframe, settings)
     assert plan.safe
     vehicle.follow(ControlSchedule.from_plan(plan, vehicle.time))
     while not vehicle.landed:

@@ -15,7 +15,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from mcap.reader import make_reader
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
@@ -23,7 +22,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import __version__
 from helireach_ros import ros_messages as rm
-from helireach_ros.bringup import ros_arguments
+from helireach_ros.bringup import JoiningMultiThreadedExecutor, ros_arguments
 from helireach_ros.cli import main as helireach_main
 from helireach_ros.demo import run_demo, summary
 from helireach_ros.log_replay import replay_log
@@ -93,9 +92,8 @@ def test_replay_compare_reproduces_the_logged_plan(demo, capsys) -> None:
     assert "1 of 1 logged plans reproduced" in capsys.readouterr().out
 
 
-def test_a_replayed_failure_drives_fresh_nodes_to_the_logged_plan(demo, monkeypatch) -> None:
+def test_a_replayed_failure_drives_fresh_nodes_to_the_logged_plan(demo, no_ros_discovery) -> None:
     """Republish the logged vehicle topics into a fresh monitor and planner: they plan the logged failure again."""
-    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
     logged = {}  # state stamp -> logged trajectory
     odometry_stamps = set()
     for message in read_log(demo.log_path):
@@ -111,7 +109,7 @@ def test_a_replayed_failure_drives_fresh_nodes_to_the_logged_plan(demo, monkeypa
     probe = Node("test_probe", context=context)
     trajectories: list[JointTrajectory] = []
     probe.create_subscription(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, trajectories.append, rm.LATCHED_QOS)
-    executor = MultiThreadedExecutor(num_threads=4, context=context)
+    executor = JoiningMultiThreadedExecutor(num_threads=4, context=context)
     for node in (monitor, planner, probe):
         executor.add_node(node)
     replay = threading.Thread(

@@ -9,9 +9,7 @@ On a failure event (``/helireach/failure_event``) the node takes the latest cano
 stored plan, and publishes the trajectory (``/helireach/landing_trajectory``), the predicted path
 (``/helireach/landing_path``) and the plan status (``/helireach/plan_status``), all latched, stamped
 with the state's stamp. Only a plan whose NLP value is ≤ 0 *and* whose independent replay lands
-within limits is called safe. Plans are made with the path held at or above the ground (parameter
-``ground_clearance``, 0 m; the airframe file allows 1 ft below, where the NLP likes to put its
-touchdown point — a real vehicle meets the ground first, faster than the plan says).
+within limits is called safe.
 
 If no plan is out ``deadline`` seconds after the failure event (the solve is slow or failed), a
 fallback is published, flagged ``fallback=true``: the nearest envelope plan's controls from now on
@@ -30,7 +28,6 @@ Run: ``python -m helireach_ros.nodes.planner_node`` (or the ``helireach_planner`
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import threading
 import time
@@ -110,8 +107,7 @@ class LandingPlannerNode(Node):
     """Plans landings after engine failures and re-plans during the descent.
 
     Parameters: ``airframe``, ``planner_settings`` (file, '' = config/planner.yaml), ``envelope_file``
-    ('' = the shipped one, ``none`` = no envelope), ``ground_clearance`` (m; how far below ground a planned
-    path may go, 0 = touch down at or above it), ``deadline`` (s), ``replan_period`` (s, 0 = off),
+    ('' = the shipped one, ``none`` = no envelope), ``deadline`` (s), ``replan_period`` (s, 0 = off),
     ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s),
     ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``.
     """
@@ -132,12 +128,6 @@ class LandingPlannerNode(Node):
         self._assume_total_power_loss = declare(
             "assume_total_power_loss", True, "plan with zero engine power (else the measured power)"
         )
-        ground_clearance = declare(
-            "ground_clearance",
-            0.0,
-            "planned paths stay above h = -this, m (the airframe file's value: 0.3048)",
-            (0.0, 10.0),
-        )
         warm_up = declare("warm_up", True, "solve one landing at startup (first-call costs)")
         self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "frame of the landing path")
         self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "JointState joint of the main rotor")
@@ -155,7 +145,7 @@ class LandingPlannerNode(Node):
         self.envelope: Any | None = None
         self._setup_error = ""
         try:
-            self._setup_core(airframe_name, settings_file, envelope_file, ground_clearance, warm_up)
+            self._setup_core(airframe_name, settings_file, envelope_file, warm_up)
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
@@ -196,18 +186,8 @@ class LandingPlannerNode(Node):
         self.create_timer(diagnostics_period, self._publish_diagnostics)
 
     # -- startup -----------------------------------------------------------------------------------------------
-    def _setup_core(
-        self, airframe_name: str, settings_file: str, envelope_file: str, ground_clearance: float, warm_up: bool
-    ) -> None:
-        """Loads airframe, settings and envelope, builds the NLP (once) and warms it up.
-
-        The NLP is built for the airframe with its ground clearance replaced by ``ground_clearance``:
-        with the airframe file's 1 ft the optimum puts its touchdown point up to 1 ft underground,
-        where the vehicle arrives (at h = 0, earlier) faster than the plan's value says, and each
-        closed-loop re-plan pushes it further down. With 0 the plan touches down at or above the
-        ground. Stricter than the envelope's NLP, so a plan called safe is safe for both; the
-        envelope's stored solutions (same NLP shape) still warm-start it.
-        """
+    def _setup_core(self, airframe_name: str, settings_file: str, envelope_file: str, warm_up: bool) -> None:
+        """Loads airframe, settings and envelope, builds the NLP (once) and warms it up."""
         from helireach_ros.airframe import load_airframe
         from helireach_ros.model import initial_state_after_failure
         from helireach_ros.planner import get_planner
@@ -216,9 +196,7 @@ class LandingPlannerNode(Node):
         started = time.perf_counter()
         self.airframe = load_airframe(airframe_name)
         self.settings = load_settings(settings_file or None)
-        limits = dataclasses.replace(self.airframe.limits, ground_clearance=float(ground_clearance))
-        self.planning_airframe = dataclasses.replace(self.airframe, limits=limits)
-        self.planner = get_planner(self.planning_airframe, self.settings)
+        self.planner = get_planner(self.airframe, self.settings)
         self.envelope, self._envelope_note = self._load_envelope(envelope_file)
         self.warm_up_ms = math.nan
         if warm_up:
