@@ -287,6 +287,9 @@ def run_bringup(
     )
     if system.log_path is not None:
         print(f"helireach bringup: logging to {system.log_path}", flush=True)
+    for node in system.extra:
+        if hasattr(node, "url"):
+            print(f"helireach bringup: cockpit display at {node.url}", flush=True)
     try:
         system.spin_until_signal()
     finally:

@@ -9,9 +9,9 @@ descent rate, forward speed and rotor speed. Every topic goes to an MCAP log.
 Writes ``<out>/hv_diagram.png`` (the H-V diagram with the flown track), ``<out>/landing_plan.png``
 (the first plan: states, replay and controls) and ``<out>/logs/helireach_*.mcap``; prints a summary.
 Exits 0 only if the landing met the limits. ``--hold`` keeps the nodes running after touchdown
-(e.g. with ``--display`` to look at the cockpit page) until Ctrl-C.
+(the cockpit display page, served by default, stays up with them) until Ctrl-C.
 
-Run: ``python -m helireach_ros.demo --out out [--hold] [--display] [--scenario NAME]``.
+Run: ``python -m helireach_ros.demo --out out [--hold] [--no-display] [--scenario NAME]``.
 """
 
 from __future__ import annotations
@@ -84,9 +84,9 @@ def run_demo(
     out.mkdir(parents=True, exist_ok=True)
     extra = []
     if display:
-        from helireach_ros.nodes.display import CockpitDisplay
+        from helireach_ros.nodes.display import create_display_with_fallback
 
-        extra.append(CockpitDisplay)
+        extra.append(create_display_with_fallback)
     result = DemoResult()
     system = build_system(
         params_files,
@@ -102,6 +102,9 @@ def run_demo(
     result.log_path, result.scenario = system.log_path, sim.scenario
     result.limits = sim.vehicle.airframe.limits
     result.nominal_rotor_speed = sim.vehicle.nominal_airframe.nominal_rotor_speed
+    for node in system.extra:
+        if hasattr(node, "url"):
+            print(f"helireach demo: cockpit display at {node.url}", flush=True)
     signals = system.stop_on_signals() if handle_signals else contextlib.nullcontext()
     try:
         with signals:
@@ -205,7 +208,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="out", help="folder for the figures and the MCAP log")
     parser.add_argument("--scenario", default=None, help="simulated scenario (default: demo_500ft_75kt)")
     parser.add_argument("--hold", action="store_true", help="keep the nodes running after touchdown until Ctrl-C")
-    parser.add_argument("--display", action="store_true", help="also run the cockpit display node")
+    parser.add_argument(
+        "--no-display", dest="display", action="store_false", help="do not serve the cockpit display page"
+    )
     parser.add_argument("--params-file", action="append", default=[], help="extra ROS parameter file (repeatable)")
     arguments = parser.parse_args(argv)
     result = run_demo(

@@ -180,9 +180,9 @@ def _run_bringup(arguments: argparse.Namespace) -> int:
 
     extra = []
     if arguments.display:
-        from helireach_ros.nodes.display import CockpitDisplay
+        from helireach_ros.nodes.display import create_display_with_fallback
 
-        extra.append(CockpitDisplay)
+        extra.append(create_display_with_fallback)
     try:
         return run_bringup(
             arguments.params_file,

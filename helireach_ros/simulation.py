@@ -41,7 +41,7 @@ from helireach_ros.resources import config_path
 from helireach_ros.settings import PlannerSettings
 from helireach_ros.transcription import terminal_cost
 from helireach_ros.units import FT, KT, UnitError, convert_to_si
-from helireach_ros.verification import _segment_integrator
+from helireach_ros.verification import segment_integrator
 
 __all__ = [
     "HOLD_STEP_S",
@@ -392,7 +392,7 @@ class SimulatedVehicle:
         self.nominal_airframe = airframe if airframe is not None else load_airframe(scenario.airframe)
         self.airframe = mismatched_airframe(self.nominal_airframe, scenario.parameter_mismatch)
         self.settings = settings or PlannerSettings()
-        self._integrator = _segment_integrator(
+        self._integrator = segment_integrator(
             self.airframe, _SAMPLES_PER_SEGMENT, self.settings.replay_relative_tolerance
         )
         self._rng = np.random.default_rng(scenario.seed)

@@ -31,7 +31,7 @@ from helireach_ros.model import STATE_NAMES, dynamics_function
 from helireach_ros.settings import PlannerSettings
 from helireach_ros.transcription import DecodedPlan, terminal_cost
 
-__all__ = ["ReplaySummary", "control_function", "replay_plan"]
+__all__ = ["ReplaySummary", "control_function", "replay_plan", "segment_integrator"]
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,7 @@ def control_function(control_times: np.ndarray, control_values: np.ndarray, inte
 
 
 @lru_cache(maxsize=16)
-def _segment_integrator(airframe: Airframe, samples: int, relative_tolerance: float) -> ca.Function:
+def segment_integrator(airframe: Airframe, samples: int, relative_tolerance: float) -> ca.Function:
     """CVODES over one control segment in normalised time σ ∈ [0, 1], outputs at ``samples`` points.
 
     Parameters p = (u_start[2], u_end[2], duration): the control varies linearly over the segment
@@ -134,7 +134,7 @@ def replay_plan(
         initial_state: the state at the failure (6, SI).
         plan: the decoded NLP solution.
     """
-    integrator = _segment_integrator(airframe, settings.replay_samples_per_interval, settings.replay_relative_tolerance)
+    integrator = segment_integrator(airframe, settings.replay_samples_per_interval, settings.replay_relative_tolerance)
     state = np.asarray(initial_state, dtype=float)
     times, states = [0.0], [state]
     clearance = airframe.limits.ground_clearance

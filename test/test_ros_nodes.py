@@ -390,6 +390,44 @@ def test_unsafe_state_gets_a_best_effort_plan_flagged_unsafe(context: Context, e
         harness.close()
 
 
+def test_a_rotor_below_its_limit_is_not_clipped_into_a_safe_plan(context: Context) -> None:
+    """Noise a hair outside the rotor limits is clipped; a rotor truly below its limit is planned as measured."""
+    harness, planner = planner_harness(context, Parameter("replan_period", value=0.0))
+    plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
+    limit = planner.airframe.limits.min_rotor_speed_ratio * OMEGA0
+    try:
+        noisy = 0.998 * limit
+        assert harness.keep_publishing(
+            500 * FT,
+            75 * KT,
+            rotor_speed=noisy,
+            until=lambda: (
+                (planner.current_state() or [None])[0] is not None
+                and planner.current_state()[3] == "measured"
+                and math.isclose(planner.current_state()[0][2], limit)
+            ),
+        )
+        slow = 0.80 * OMEGA0  # 5 % of Ω₀ below the limit: the energy the plan may count on is not there
+        assert harness.keep_publishing(
+            500 * FT,
+            75 * KT,
+            rotor_speed=slow,
+            until=lambda: planner.current_state() is not None and math.isclose(planner.current_state()[0][2], slow),
+        )
+        harness.publish_state(500 * FT, 75 * KT, rotor_speed=slow)
+        harness.failure.publish(Bool(data=False))
+        harness.failure.publish(Bool(data=True))
+        # No plan exists from there (the NLP fails; a flagged fallback goes out); whatever is published, none is safe.
+        assert harness.spin_until(lambda: bool(plan_statuses))
+        harness.spin_until(lambda: False, 1.0)
+        for status in plan_statuses:
+            assert rm.status_values(status)["safe"] == "false", status.message
+            assert status.level != DiagnosticStatus.OK
+        assert float(rm.status_values(plan_statuses[-1])["initial_rotor_speed_rad_s"]) == pytest.approx(slow)
+    finally:
+        harness.close()
+
+
 def test_best_effort_vehicle_publishers_are_accepted(context: Context) -> None:
     """Sensor inputs are subscribed best-effort, so a best-effort vehicle driver connects too."""
     harness = Harness(context, VehicleMonitor(context=context))

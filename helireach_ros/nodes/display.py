@@ -65,6 +65,7 @@ __all__ = [
     "DisplayServerError",
     "banner_level",
     "boundary_segments",
+    "create_display_with_fallback",
     "envelope_section",
     "hold_until_interrupted",
     "main",
@@ -953,6 +954,15 @@ def hold_until_interrupted(display: CockpitDisplay) -> None:
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+
+
+def create_display_with_fallback(preferred_port: int = DEFAULT_PORT, **node_options: Any) -> CockpitDisplay:
+    """A display on ``preferred_port``, or on any free port when that one is taken (a demo must not fail
+    because 8080 is busy); read the address from :attr:`CockpitDisplay.url`."""
+    try:
+        return CockpitDisplay(parameter_overrides=[Parameter("port", value=preferred_port)], **node_options)
+    except DisplayServerError:
+        return CockpitDisplay(parameter_overrides=[Parameter("port", value=0)], **node_options)
 
 
 def run_display(

@@ -51,6 +51,7 @@ from helireach_ros.units import FT, KT
 __all__ = ["FallbackPlan", "LandingPlannerNode", "PublishedPlan", "main"]
 
 _PLAN_HISTORY = 200  # published plans kept for inspection (demo, tests)
+_ROTOR_NOISE_TOLERANCE = 0.01  # fraction of Ω₀ a measured rotor speed may lie outside its limits as noise
 
 
 @dataclass(frozen=True)
@@ -249,8 +250,8 @@ class LandingPlannerNode(Node):
     def current_state(self) -> tuple[np.ndarray, int, str, str] | None:
         """(state y, v, Ω, h, z, P; its stamp ns; vehicle frame; rotor-speed source), or None without a fresh state.
 
-        Without a fresh rotor speed Ω₀ is assumed (the source says so; re-plans are then skipped). Ω is
-        clipped into the rotor limits (noise can put it just outside, where no plan exists).
+        Without a fresh rotor speed Ω₀ is assumed (the source says so; re-plans are then skipped). Ω within
+        1 % of Ω₀ outside the rotor limits is clipped to them (sensor noise); farther out it is kept.
         """
         now_ns = self._now_ns()
         timeout_ns = self._state_timeout * 1e9
@@ -266,11 +267,16 @@ class LandingPlannerNode(Node):
             rotor_speed, source, power = self.airframe.nominal_rotor_speed, "assumed_nominal", None
         if self._assume_total_power_loss or power is None:
             power = 0.0
-        # Sensor noise can put Ω a hair outside the rotor limits, where the NLP has no solution at all.
+        # Sensor noise can put Ω a hair outside the rotor limits, where the NLP has no solution at all; only
+        # that much is clipped. A rotor truly outside its limits is planned from as measured (no safe plan
+        # exists): clipping it inside would plan with rotor energy the aircraft does not have.
         limits, omega0 = self.airframe.limits, self.airframe.nominal_rotor_speed
-        rotor_speed = min(
-            max(rotor_speed, limits.min_rotor_speed_ratio * omega0), limits.max_rotor_speed_ratio * omega0
-        )
+        low, high = limits.min_rotor_speed_ratio * omega0, limits.max_rotor_speed_ratio * omega0
+        tolerance = _ROTOR_NOISE_TOLERANCE * omega0
+        if low - tolerance <= rotor_speed < low:
+            rotor_speed = low
+        elif high < rotor_speed <= high + tolerance:
+            rotor_speed = high
         return rm.helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
 
     # -- the failure --------------------------------------------------------------------------------------------

@@ -31,6 +31,7 @@ from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.topic_endpoint_info import TopicEndpointInfo
 
+from helireach_ros import ros_messages as rm
 from helireach_ros.mcap_log import McapLogError, McapLogWriter, QosDescription
 
 __all__ = [
@@ -42,31 +43,25 @@ __all__ = [
     "qos_profile",
 ]
 
-#: ``topic:pkg/msg/Type`` entries recorded when the ``topics`` parameter is not set.
-DEFAULT_TOPICS: tuple[str, ...] = (
-    "/vehicle/odometry:nav_msgs/msg/Odometry",
-    "/vehicle/rotor:sensor_msgs/msg/JointState",
-    "/vehicle/engine_failure:std_msgs/msg/Bool",
-    "/helireach/safety_status:diagnostic_msgs/msg/DiagnosticStatus",
-    "/helireach/landing_trajectory:trajectory_msgs/msg/JointTrajectory",
-    "/helireach/landing_path:nav_msgs/msg/Path",
-    "/helireach/plan_status:diagnostic_msgs/msg/DiagnosticStatus",
-    "/helireach/state:nav_msgs/msg/Odometry",
-    "/helireach/failure_event:std_msgs/msg/Header",
-    "/diagnostics:diagnostic_msgs/msg/DiagnosticArray",
-    "/helireach/touchdown:diagnostic_msgs/msg/DiagnosticStatus",
-)
+#: ``topic:pkg/msg/Type`` entries recorded when the ``topics`` parameter is not set: every topic of the
+#: contract table (:data:`helireach_ros.ros_messages.TOPICS`, documented in msg_docs/).
+DEFAULT_TOPICS: tuple[str, ...] = tuple(f"{spec.name}:{spec.type_name}" for spec in rm.TOPICS.values())
 
-# The QoS helireach publishers use (see msg_docs): the safety status is latched, the rest is not.
-_LATCHED_TOPICS = {"/helireach/safety_status": QosDescription("reliable", "transient_local", 1)}
 _DEFAULT_QOS = QosDescription("reliable", "volatile", 10)
 _DISCOVERY_PERIOD_S = 0.1  # rosbag2 polls the graph at the same rate
 _MIN_SUBSCRIPTION_DEPTH = 100  # a recorder should absorb bursts rather than drop
 
 
 def documented_qos(topic: str) -> QosDescription:
-    """Return the documented QoS of a helireach topic (RELIABLE, VOLATILE, depth 10 unless latched)."""
-    return _LATCHED_TOPICS.get(topic, _DEFAULT_QOS)
+    """Return the documented publisher QoS of a topic (the contract table; RELIABLE, VOLATILE, depth 10 else)."""
+    spec = rm.TOPICS.get(topic)
+    if spec is None:
+        return _DEFAULT_QOS
+    reliable = spec.qos.reliability == ReliabilityPolicy.RELIABLE
+    latched = spec.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+    return QosDescription(
+        "reliable" if reliable else "best_effort", "transient_local" if latched else "volatile", spec.qos.depth
+    )
 
 
 def qos_profile(qos: QosDescription) -> QoSProfile:
