@@ -83,6 +83,7 @@ __all__ = [
     "odometry_message",
     "path_message",
     "pitch_quaternion",
+    "plan_status_values",
     "read_odometry",
     "read_rotor",
     "read_trajectory",
@@ -447,6 +448,26 @@ def format_value(value: Any) -> str:
     if isinstance(value, float | np.floating):
         return repr(float(value))
     return str(value)
+
+
+def plan_status_values(plan: Any) -> dict[str, Any]:
+    """The ``/helireach/plan_status`` values that describe a converged plan itself (see msg_docs); the
+    planner node adds its bookkeeping (warm start, re-plan index, latency, failure and state)."""
+    touchdown = plan.replay.touchdown_state
+    return {
+        "status": plan.status,
+        "safe": plan.safe,
+        "verified": plan.verified,
+        "fallback": False,
+        "value": plan.value,
+        "time_to_land_s": plan.time_to_land,
+        "solve_time_ms": plan.solver.solve_time_ms,
+        "iterations": plan.solver.iterations,
+        "solver_status": plan.solver.status,
+        "predicted_touchdown_descent_rate_m_s": touchdown[0],
+        "predicted_touchdown_forward_speed_m_s": touchdown[1],
+        "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
+    }
 
 
 def diagnostic_status(

@@ -409,16 +409,7 @@ def real_plan() -> Any:
 def plan_messages(plan: Any, start: TimeMsg) -> tuple[JointTrajectory, PathMsg, DiagnosticStatus]:
     """The trajectory, predicted path and plan status for ``plan`` as the planner node publishes them."""
     stamp_ns = rm.stamp_nanoseconds(start)
-    values = {
-        "status": plan.status,
-        "safe": plan.safe,
-        "verified": plan.verified,
-        "fallback": False,
-        "value": plan.value,
-        "time_to_land_s": plan.time_to_land,
-        "solve_time_ms": plan.solver.solve_time_ms,
-        "replan_index": 0,
-    }
+    values = {**rm.plan_status_values(plan), "replan_index": 0}
     level = DiagnosticStatus.OK if plan.safe else DiagnosticStatus.ERROR
     return (
         rm.trajectory_message(plan, stamp_ns),

@@ -486,25 +486,13 @@ class LandingPlannerNode(Node):
             self._path_publisher.publish(
                 rm.path_message(plan.times, plan.states, stamp_ns, self._world_frame, plan.controls[1])
             )
-            touchdown = plan.replay.touchdown_state
             values = {
-                "status": plan.status,
-                "safe": plan.safe,
-                "verified": plan.verified,
-                "fallback": False,
-                "value": plan.value,
-                "time_to_land_s": plan.time_to_land,
-                "solve_time_ms": plan.solver.solve_time_ms,
-                "iterations": plan.solver.iterations,
-                "solver_status": plan.solver.status,
+                **rm.plan_status_values(plan),
                 "warm_start": warm_source,
                 "replan_index": failure.replans if replan else 0,
                 "late": late,
                 "latency_ms": record.latency_ms,
                 "rotor_speed_source": rotor_source,
-                "predicted_touchdown_descent_rate_m_s": touchdown[0],
-                "predicted_touchdown_forward_speed_m_s": touchdown[1],
-                "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
                 **self._common_values(failure, plan.initial_state, stamp_ns),
             }
             level, text = self._plan_verdict(plan, rotor_source)
