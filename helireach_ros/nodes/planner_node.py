@@ -101,6 +101,7 @@ class _Failure:
     current: PublishedPlan | None = None
     replans: int = 0
     replans_failed: int = 0
+    deadline_handled: bool = False
     history: list[PublishedPlan] = field(default_factory=list)
 
 
@@ -179,8 +180,10 @@ class LandingPlannerNode(Node):
             callback_group=self._solver_group,
             **rm.NO_QOS_EVENTS_SUBSCRIPTION,
         )
-        self._deadline_timer = self.create_timer(
-            self._deadline, self._on_deadline, callback_group=self._deadline_group, autostart=False
+        # A periodic check, never cancelled or reset from another thread: cancelling a one-shot timer
+        # while the multi-threaded executor is about to fire it raises inside the executor.
+        self.create_timer(
+            min(max(self._deadline / 5.0, 0.005), 0.05), self._on_deadline, callback_group=self._deadline_group
         )
         if self._replan_period > 0.0:
             self.create_timer(self._replan_period, self._on_replan_timer, callback_group=self._solver_group)
@@ -290,7 +293,6 @@ class LandingPlannerNode(Node):
         if self.planner is None:
             self._publish_status_only(failure, f"planner not configured ({self._setup_error})")
             return
-        self._deadline_timer.reset()
         self._plan_initial(failure)
 
     def _plan_initial(self, failure: _Failure, retry: bool = False) -> None:
@@ -321,11 +323,13 @@ class LandingPlannerNode(Node):
             return None, f"{type(error).__name__}: {error}"
 
     def _on_deadline(self) -> None:
-        self._deadline_timer.cancel()
         with self._lock:
             failure = self._failure
-        if failure is None or failure.published:
-            return
+            if failure is None or failure.published or failure.deadline_handled:
+                return
+            if self._now_ns() - failure.event_received_ns < self._deadline * 1e9:
+                return
+            failure.deadline_handled = True
         current = self.current_state()
         if current is None:
             self._publish_status_only(failure, f"no plan within {self._deadline:g} s and no valid state")
@@ -499,8 +503,6 @@ class LandingPlannerNode(Node):
             self._status_publisher.publish(
                 rm.diagnostic_status(level, f"{self.get_name()}: landing plan", text, self.airframe.name, values)
             )
-            if not replan:
-                self._deadline_timer.cancel()
             self._remember(failure, record)
         if not replan:
             self.get_logger().info(f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
