@@ -12,6 +12,9 @@ import os
 
 import pytest
 
+from helireach_ros.airframe import Airframe, load_airframe
+from helireach_ros.settings import PlannerSettings, load_settings
+
 _NEXT_DOMAIN = itertools.count()
 _DOMAIN_COUNT = 200  # ids 1..200 are valid for every RMW on Linux
 
@@ -36,3 +39,15 @@ def no_ros_discovery(monkeypatch: pytest.MonkeyPatch) -> None:
     """No discovery beyond this process (same-process delivery still works)."""
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "OFF")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(next_domain_id()))
+
+
+@pytest.fixture(scope="module")
+def airframe() -> Airframe:
+    """The default airframe, as shipped."""
+    return load_airframe("uh60a_class")
+
+
+@pytest.fixture(scope="module")
+def settings() -> PlannerSettings:
+    """The default planner settings (config/planner.yaml)."""
+    return load_settings()

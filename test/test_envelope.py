@@ -31,22 +31,11 @@ from helireach_ros.envelope_compute import EnvelopeJob, compute_envelope, parse_
 from helireach_ros.envelope_plot import boundary_geometry, plot_envelope
 from helireach_ros.model import initial_state_after_failure
 from helireach_ros.planner import get_planner
-from helireach_ros.settings import load_settings
 from helireach_ros.units import FT, KT
 
 HEIGHTS_FT = "0:600:4"
 SPEEDS_KT = "0:60:3"
 TIMING_ARRAYS = {"solve_time_ms"}  # differ between runs; everything else must be identical
-
-
-@pytest.fixture(scope="module")
-def airframe():
-    return load_airframe("uh60a_class")
-
-
-@pytest.fixture(scope="module")
-def settings():
-    return load_settings()
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from helireach_ros.airframe import ConfigError, load_airframe
+from helireach_ros.airframe import ConfigError
 from helireach_ros.model import initial_state_after_failure
 from helireach_ros.planner import plan_landing
-from helireach_ros.settings import load_settings
 from helireach_ros.simulation import (
     ControlSchedule,
     SimulatedVehicle,
@@ -21,16 +20,6 @@ from helireach_ros.simulation import (
 from helireach_ros.units import FT, KT
 
 SHIPPED_SCENARIOS = ("demo_500ft_75kt", "nominal_500ft_75kt", "low_hover_100ft")
-
-
-@pytest.fixture(scope="module")
-def airframe():
-    return load_airframe("uh60a_class")
-
-
-@pytest.fixture(scope="module")
-def settings():
-    return load_settings()
 
 
 @pytest.fixture(scope="module")
