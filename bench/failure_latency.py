@@ -93,10 +93,16 @@ class Vehicle:
             self.executor.spin_once(timeout_sec=0.02)
 
     def wait_for_subscribers(self) -> None:
+        """Discovery both ways: the monitor sees the vehicle's topics and the bench sees the planner's."""
         deadline = time.perf_counter() + 30.0
-        while self.failure.get_subscription_count() == 0 or self.odometry.get_subscription_count() == 0:
+        while (
+            self.failure.get_subscription_count() == 0
+            or self.odometry.get_subscription_count() == 0
+            or self.node.count_publishers(rm.TOPIC_LANDING_TRAJECTORY) == 0
+            or self.node.count_publishers(rm.TOPIC_PLAN_STATUS) == 0
+        ):
             if time.perf_counter() > deadline:
-                raise RuntimeError("the monitor never subscribed (discovery failed?)")
+                raise RuntimeError("the nodes never matched the bench (discovery failed?)")
             self.executor.spin_once(timeout_sec=0.05)
 
     def fail(self, state: tuple[float, float]) -> tuple[float, float, bool]:
