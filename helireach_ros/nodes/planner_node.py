@@ -181,9 +181,11 @@ class LandingPlannerNode(Node):
             **rm.NO_QOS_EVENTS_SUBSCRIPTION,
         )
         # A periodic check, never cancelled or reset from another thread: cancelling a one-shot timer
-        # while the multi-threaded executor is about to fire it raises inside the executor.
+        # while the multi-threaded executor is about to fire it raises inside the executor. Every half
+        # deadline (the fallback goes out within 1.5 deadlines): a faster check costs the composed
+        # process executor wake-ups that the closed loop's re-plans need.
         self.create_timer(
-            min(max(self._deadline / 5.0, 0.005), 0.05), self._on_deadline, callback_group=self._deadline_group
+            max(self._deadline / 2.0, 0.005), self._on_deadline, callback_group=self._deadline_group
         )
         if self._replan_period > 0.0:
             self.create_timer(self._replan_period, self._on_replan_timer, callback_group=self._solver_group)
