@@ -1,14 +1,16 @@
-"""Bringup: the helireach nodes composed in one process under a multi-threaded executor.
+"""Bringup: the helireach nodes composed in one process under one executor.
 
 There is no ``ros2 launch`` with the PyPI wheels; this is the ros2/examples ``composed.py`` pattern.
 :func:`build_system` initialises a context with ``config/nodes.yaml`` (then the user's parameter
 files, which win), creates the monitor, envelope status and planner nodes, optionally the simulated
 vehicle and any extra nodes (e.g. the cockpit display), and last the MCAP recorder, whose metadata
-names the airframe, envelope, software version and scenario. The planner's solver has its own
-callback group; the executor has at least four threads so a solve never starves the others.
+names the airframe, envelope, software version and scenario. One single-threaded executor spins
+them all by default (:mod:`helireach_ros.executors`); the planner solves on its own thread, so no
+callback blocks the others.
 
-``helireach bringup [--params-file F] [--with-sim]`` (:func:`run_bringup`) spins until Ctrl-C or
-SIGTERM and then finishes the log. Each node also has its own console script for multi-process use.
+``helireach bringup [--params-file F] [--with-sim] [--executor KIND]`` (:func:`run_bringup`) spins
+until Ctrl-C or SIGTERM and then finishes the log. Each node also has its own console script for
+multi-process use.
 """
 
 from __future__ import annotations
@@ -27,12 +29,13 @@ from pathlib import Path
 
 import rclpy
 from rclpy.context import Context
-from rclpy.executors import MultiThreadedExecutor
+from rclpy.executors import Executor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from helireach_ros import __version__
+from helireach_ros.executors import DEFAULT_EXECUTOR, create_executor
 from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.nodes.monitor import VehicleMonitor
 from helireach_ros.nodes.planner_node import LandingPlannerNode
@@ -41,10 +44,9 @@ from helireach_ros.nodes.sim_vehicle import SimVehicleNode
 from helireach_ros.resources import config_path
 
 __all__ = [
+    "DEFAULT_EXECUTOR",
     "DEFAULT_PARAMETERS",
-    "MIN_EXECUTOR_THREADS",
     "HelireachSystem",
-    "JoiningMultiThreadedExecutor",
     "build_system",
     "ros_arguments",
     "run_bringup",
@@ -52,7 +54,6 @@ __all__ = [
 
 DEFAULT_PARAMETERS = "nodes.yaml"
 """The node parameter file in ``config/``, loaded before the user's."""
-MIN_EXECUTOR_THREADS = 4
 _DRAIN_S = 0.3  # after a stop signal: run the callbacks already queued before finishing the log
 
 
@@ -66,27 +67,12 @@ def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args:
     return [*arguments, *ros_args, "--"]
 
 
-class JoiningMultiThreadedExecutor(MultiThreadedExecutor):
-    """A MultiThreadedExecutor whose shutdown also waits for callbacks still running in its thread pool.
-
-    rclpy 7.1's ``shutdown`` returns while pool threads may still run callbacks; destroying the nodes
-    then makes those callbacks fail ("cannot use Destroyable because destruction was requested").
-    """
-
-    def shutdown(self, timeout_sec: float | None = None) -> bool:
-        done = super().shutdown(timeout_sec)
-        pool = getattr(self, "_executor", None)  # the ThreadPoolExecutor (not public API)
-        if pool is not None:
-            pool.shutdown(wait=True)
-        return done
-
-
 @dataclass
 class HelireachSystem:
     """The composed nodes, their executor and context."""
 
     context: Context
-    executor: MultiThreadedExecutor
+    executor: Executor
     monitor: VehicleMonitor
     envelope_status: EnvelopeStatusNode
     planner: LandingPlannerNode
@@ -207,7 +193,7 @@ def build_system(
     extra_nodes: Sequence[Callable[..., Node]] = (),
     context: Context | None = None,
     ros_args: Sequence[str] = (),
-    num_threads: int | None = None,
+    executor: str = DEFAULT_EXECUTOR,
     command: str = "helireach bringup",
 ) -> HelireachSystem:
     """Creates the composed system (not yet spinning).
@@ -221,7 +207,7 @@ def build_system(
         extra_nodes: factories called with the node options (``context=...``), e.g. the display class.
         context: a fresh context to initialise (default: a new one).
         ros_args: further ROS arguments (e.g. ``["-p", "helireach_planner:deadline:=0.1"]``).
-        num_threads: executor threads (default: max(4, CPUs)).
+        executor: the executor kind (:data:`~helireach_ros.executors.EXECUTOR_KINDS`).
         command: recorded in the log's metadata.
     """
     context = context if context is not None else Context()
@@ -258,11 +244,11 @@ def build_system(
             node.destroy_node()
         rclpy.try_shutdown(context=context)
         raise
-    threads = num_threads if num_threads is not None else max(MIN_EXECUTOR_THREADS, os.cpu_count() or 1)
-    executor = JoiningMultiThreadedExecutor(num_threads=threads, context=context)
-    system = HelireachSystem(context, executor, monitor, envelope_status, planner, sim, recorder, extra)
+    system = HelireachSystem(
+        context, create_executor(executor, context), monitor, envelope_status, planner, sim, recorder, extra
+    )
     for node in system.nodes:
-        executor.add_node(node)
+        system.executor.add_node(node)
     return system
 
 
@@ -274,6 +260,7 @@ def run_bringup(
     record: bool = True,
     extra_nodes: Sequence[Callable[..., Node]] = (),
     ros_args: Sequence[str] = (),
+    executor: str = DEFAULT_EXECUTOR,
 ) -> int:
     """``helireach bringup``: runs the system until Ctrl-C or SIGTERM; returns the exit code."""
     system = build_system(
@@ -284,6 +271,7 @@ def run_bringup(
         scenario=scenario,
         extra_nodes=extra_nodes,
         ros_args=ros_args,
+        executor=executor,
     )
     if system.log_path is not None:
         print(f"helireach bringup: logging to {system.log_path}", flush=True)

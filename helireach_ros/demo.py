@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
+
 __all__ = ["DemoResult", "main", "run_demo"]
 
 _TOUCHDOWN_TIMEOUT_S = 120.0  # wall time from start; the demo scenario lands about 16 s in
@@ -75,6 +77,7 @@ def run_demo(
     context: Any = None,
     handle_signals: bool = True,
     figures: bool = True,
+    executor: str = DEFAULT_EXECUTOR,
 ) -> DemoResult:
     """Runs the demo (see the module docstring) and returns what it produced."""
     from helireach_ros.bringup import build_system
@@ -95,6 +98,7 @@ def run_demo(
         scenario=scenario,
         extra_nodes=extra,
         context=context,
+        executor=executor,
         command="python -m helireach_ros.demo",
     )
     sim, planner, status = system.sim, system.planner, system.envelope_status
@@ -212,6 +216,9 @@ def main(argv: list[str] | None = None) -> int:
         "--no-display", dest="display", action="store_false", help="do not serve the cockpit display page"
     )
     parser.add_argument("--params-file", action="append", default=[], help="extra ROS parameter file (repeatable)")
+    parser.add_argument(
+        "--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="executor kind (default: %(default)s)"
+    )
     arguments = parser.parse_args(argv)
     result = run_demo(
         arguments.out,
@@ -219,6 +226,7 @@ def main(argv: list[str] | None = None) -> int:
         hold=arguments.hold,
         display=arguments.display,
         params_files=tuple(arguments.params_file),
+        executor=arguments.executor,
     )
     print(summary(result), flush=True)
     return 0 if result.landed_within_limits else 1

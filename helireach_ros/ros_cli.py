@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
+
 __all__ = ["PlanComparison", "compare_logged_plans", "register"]
 
 _STATE_KEYS = (
@@ -192,6 +194,7 @@ def _run_bringup(arguments: argparse.Namespace) -> int:
             record=not arguments.no_record,
             extra_nodes=extra,
             ros_args=arguments.ros_args,
+            executor=arguments.executor,
         )
     except (FileNotFoundError, ValueError) as error:
         print(f"helireach bringup: {error}", file=sys.stderr)
@@ -240,7 +243,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "bringup",
         help="run the helireach ROS 2 nodes in one process",
         description="Runs monitor, envelope status, planner (and optionally the simulated vehicle and the cockpit "
-        "display) under one multi-threaded executor, recording every topic to MCAP, until Ctrl-C or SIGTERM.",
+        "display) under one executor, recording every topic to MCAP, until Ctrl-C or SIGTERM.",
     )
     bringup.add_argument(
         "--params-file",
@@ -254,6 +257,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     bringup.add_argument("--log-dir", help="folder for the MCAP log (default: the recorder's log_dir parameter)")
     bringup.add_argument("--no-record", action="store_true", help="do not record an MCAP log")
     bringup.add_argument("--display", action="store_true", help="also run the cockpit display node")
+    bringup.add_argument(
+        "--executor",
+        choices=EXECUTOR_KINDS,
+        default=DEFAULT_EXECUTOR,
+        help="the executor spinning the nodes (default: %(default)s; see helireach_ros/executors.py)",
+    )
     bringup.add_argument(
         "--ros-args",
         nargs=argparse.REMAINDER,

@@ -531,22 +531,23 @@ def declare_checked_parameter(
         return node.declare_parameter(name, default, descriptor, ignore_override=True).value
 
 
-def run_node(node_class: Callable[[], Node], args: list[str] | None = None, multi_threaded: bool = False) -> None:
+def run_node(node_class: Callable[[], Node], args: list[str] | None = None) -> None:
     """The body of a node's ``main``: init, spin until Ctrl-C or SIGTERM, destroy, shut down (ros2/demos style).
 
     Args:
         node_class: builds the node (called after ``rclpy.init``).
         args: command-line arguments (default ``sys.argv``).
-        multi_threaded: spin a ``MultiThreadedExecutor`` (for nodes with a separate callback group).
     """
     import rclpy
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException
+
+    from helireach_ros.executors import DEFAULT_EXECUTOR, create_executor
 
     rclpy.init(args=args)
     node = None
     try:
         node = node_class()
-        executor = MultiThreadedExecutor() if multi_threaded else SingleThreadedExecutor()
+        executor = create_executor(DEFAULT_EXECUTOR)
         executor.add_node(node)
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -26,8 +26,9 @@ from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import ros_messages as rm
-from helireach_ros.bringup import JoiningMultiThreadedExecutor, build_system, ros_arguments
+from helireach_ros.bringup import build_system, ros_arguments
 from helireach_ros.envelope import default_envelope_path, load_envelope
+from helireach_ros.executors import create_executor
 from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.nodes.monitor import VehicleMonitor
 from helireach_ros.nodes.planner_node import LandingPlannerNode
@@ -57,7 +58,7 @@ class Harness:
         self.context = context
         self.nodes = list(nodes)
         self.probe = Node("test_probe", context=context)
-        self.executor = JoiningMultiThreadedExecutor(num_threads=4, context=context)
+        self.executor = create_executor("multi_threaded", context, num_threads=4)
         for node in [*self.nodes, self.probe]:
             self.executor.add_node(node)
         self.received: dict[str, list[Any]] = {}

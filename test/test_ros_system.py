@@ -25,9 +25,10 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import __version__
 from helireach_ros import ros_messages as rm
-from helireach_ros.bringup import JoiningMultiThreadedExecutor, ros_arguments
+from helireach_ros.bringup import ros_arguments
 from helireach_ros.cli import main as helireach_main
 from helireach_ros.demo import run_demo, summary
+from helireach_ros.executors import create_executor
 from helireach_ros.log_replay import replay_log
 from helireach_ros.mcap_log import read_log, read_log_metadata
 from helireach_ros.nodes.monitor import VehicleMonitor
@@ -118,7 +119,7 @@ def test_a_replayed_failure_drives_fresh_nodes_to_the_logged_plan(demo, no_ros_d
     probe = Node("test_probe", context=context)
     trajectories: list[JointTrajectory] = []
     probe.create_subscription(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, trajectories.append, rm.LATCHED_QOS)
-    executor = JoiningMultiThreadedExecutor(num_threads=4, context=context)
+    executor = create_executor("multi_threaded", context, num_threads=4)
     for node in (monitor, planner, probe):
         executor.add_node(node)
     replay = threading.Thread(

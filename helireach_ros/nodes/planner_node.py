@@ -19,18 +19,22 @@ autorotation controls at the current speed). A later converged solve replaces it
 While the descent lasts (down to ``replan_min_height``, while the current plan has more than
 ``replan_min_remaining`` seconds to go) the node re-plans every ``replan_period`` seconds from the
 current state, warm-started from its previous plan (closed loop). A re-plan that fails keeps the
-current plan. The solver runs in its own mutually exclusive callback group, the deadline in another,
-so under a ``MultiThreadedExecutor`` (CasADi releases the GIL while solving) state reception,
-fallbacks and status publishing go on during a solve.
+current plan. Solves run on the node's own solver thread, one at a time (a re-plan is skipped while a
+solve is still running); callbacks only hand work to it. So whatever executor spins the node, even a
+single-threaded one, state reception, the deadline's fallback and status publishing go on during a
+solve (CasADi releases the GIL while IPOPT and CVODES run).
 
 Run: ``python -m helireach_ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
 import threading
 import time
+from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
@@ -39,7 +43,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -152,8 +155,9 @@ class LandingPlannerNode(Node):
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
 
-        self._solver_group = MutuallyExclusiveCallbackGroup()
-        self._deadline_group = MutuallyExclusiveCallbackGroup()
+        # One solve at a time, off the executor: a slow solve must not hold up the deadline or the inputs.
+        self._solver_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="helireach_solver")
+        self._solve_job: Future | None = None
         self._trajectory_publisher = self.create_publisher(
             JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
@@ -177,18 +181,14 @@ class LandingPlannerNode(Node):
             rm.TOPIC_FAILURE_EVENT,
             self._on_failure_event,
             rm.EVENT_QOS,
-            callback_group=self._solver_group,
             **rm.NO_QOS_EVENTS_SUBSCRIPTION,
         )
-        # A periodic check, never cancelled or reset from another thread: cancelling a one-shot timer
-        # while the multi-threaded executor is about to fire it raises inside the executor. Every half
-        # deadline (the fallback goes out within 1.5 deadlines): a faster check costs the composed
-        # process executor wake-ups that the closed loop's re-plans need.
-        self.create_timer(
-            max(self._deadline / 2.0, 0.005), self._on_deadline, callback_group=self._deadline_group
-        )
+        # A periodic check, never cancelled or reset from another thread (cancelling a timer that a
+        # multi-threaded executor is about to fire raises inside the executor). Every half deadline:
+        # the fallback goes out within 1.5 deadlines without waking the executor needlessly.
+        self.create_timer(max(self._deadline / 2.0, 0.005), self._on_deadline)
         if self._replan_period > 0.0:
-            self.create_timer(self._replan_period, self._on_replan_timer, callback_group=self._solver_group)
+            self.create_timer(self._replan_period, self._on_replan_timer)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
 
     # -- startup -----------------------------------------------------------------------------------------------
@@ -295,7 +295,37 @@ class LandingPlannerNode(Node):
         if self.planner is None:
             self._publish_status_only(failure, f"planner not configured ({self._setup_error})")
             return
-        self._plan_initial(failure)
+        self._submit(self._plan_initial, failure, queue=True)
+
+    # -- the solver thread ---------------------------------------------------------------------------------------
+    def _submit(self, job: Callable[..., None], *args: Any, queue: bool = False) -> bool:
+        """Runs ``job(*args)`` on the solver thread; without ``queue`` only if no solve is pending or running."""
+        with self._lock:
+            if not queue and self._solve_job is not None and not self._solve_job.done():
+                return False
+            try:
+                self._solve_job = self._solver_thread.submit(self._run_job, job, *args)
+            except RuntimeError:  # the node is being destroyed
+                return False
+        return True
+
+    def _run_job(self, job: Callable[..., None], *args: Any) -> None:
+        try:
+            job(*args)
+        except Exception as error:  # an unexpected error must not silently end planning for this failure
+            with contextlib.suppress(Exception):  # the context may already be shut down
+                self.get_logger().error(f"planning step {job.__name__} failed: {type(error).__name__}: {error}")
+
+    @property
+    def solving(self) -> bool:
+        """A solve is pending or running on the solver thread."""
+        with self._lock:
+            return self._solve_job is not None and not self._solve_job.done()
+
+    def destroy_node(self) -> None:
+        """Lets a running solve finish (queued ones are dropped), then destroys the node."""
+        self._solver_thread.shutdown(wait=True, cancel_futures=True)
+        super().destroy_node()
 
     def _plan_initial(self, failure: _Failure, retry: bool = False) -> None:
         """The first plan of a failure, warm-started from the envelope's nearest stored plan.
@@ -345,7 +375,13 @@ class LandingPlannerNode(Node):
         if failure is None or not failure.active or self.planner is None:
             return
         if not failure.published or failure.current is None or failure.current.fallback:
-            self._plan_initial(failure, retry=True)  # still no converged plan for this failure: keep trying
+            self._submit(self._plan_initial, failure, True)  # still no converged plan for this failure: keep trying
+            return
+        self._submit(self._replan, failure)
+
+    def _replan(self, failure: _Failure) -> None:
+        """One closed-loop re-plan from the current state, warm-started from the current plan."""
+        if not failure.active or failure is not self._failure:
             return
         current = self.current_state()
         if current is None:
@@ -592,8 +628,8 @@ class LandingPlannerNode(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Runs the planner node (multi-threaded executor) until Ctrl-C or SIGTERM."""
-    rm.run_node(LandingPlannerNode, args, multi_threaded=True)
+    """Runs the planner node until Ctrl-C or SIGTERM."""
+    rm.run_node(LandingPlannerNode, args)
 
 
 if __name__ == "__main__":
