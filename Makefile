@@ -31,7 +31,8 @@ bench: $(STAMP)
 	$(BIN)/python bench/plan_latency.py
 	$(BIN)/python bench/replay_failures.py
 	$(BIN)/python bench/envelope_throughput.py
-	test ! -f bench/failure_latency.py || $(BIN)/python bench/failure_latency.py
+	$(BIN)/python bench/failure_latency.py
+	$(BIN)/python bench/closed_loop_latency.py
 
 clean:
 	rm -rf $(VENV) $(OUT) build install log *.egg-info

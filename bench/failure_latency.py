@@ -1,6 +1,7 @@
 """Failure message → landing trajectory on the wire: p50/p95 over many failures at different states.
 
 Run: .venv/bin/python bench/failure_latency.py [--failures 40] [--mode both|composed|cross-process] [--seed 1]
+     [--executor single_threaded|events|multi_threaded]
 
 For each failure the bench streams a level-flight state (50 Hz odometry and rotor speed) at a seeded
 random (height, speed) over 50–800 ft × 0–115 kt (off the envelope grid, so the warm start is a
@@ -10,7 +11,7 @@ landing trajectory stamped with that state. The path is the product's: vehicle f
 failure event → planner (warm start from the envelope, IPOPT, independent replay) → trajectory → back.
 
 * ``composed``: monitor, envelope status, planner and MCAP recorder in this process under bringup's
-  multi-threaded executor; the bench's node shares the executor.
+  executor (``--executor``, default single-threaded); the bench's node shares the executor.
 * ``cross-process``: ``helireach bringup`` in a child process (LOCALHOST discovery, a random domain
   id); the DDS transport is paid both ways.
 
@@ -45,6 +46,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import ros_messages as rm
 from helireach_ros.bringup import build_system
+from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 from helireach_ros.units import FT, KT
 
 _NO_REPLANNING = ["-p", "helireach_planner:replan_period:=0.0"]
@@ -156,20 +158,23 @@ def _run(vehicle: Vehicle, states: list[tuple[float, float]]) -> dict[str, list]
     return results
 
 
-def run_composed(states: list[tuple[float, float]], log_dir: str) -> dict[str, list]:
+def run_composed(states: list[tuple[float, float]], log_dir: str, executor: str) -> dict[str, list]:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
-    system = build_system(log_dir=log_dir, ros_args=_NO_REPLANNING, context=Context())
+    system = build_system(log_dir=log_dir, ros_args=_NO_REPLANNING, context=Context(), executor=executor)
     try:
         return _run(Vehicle(system.context, system.executor), states)
     finally:
         system.shutdown()
 
 
-def run_cross_process(states: list[tuple[float, float]], log_dir: str) -> dict[str, list]:
+def run_cross_process(states: list[tuple[float, float]], log_dir: str, executor: str) -> dict[str, list]:
     environment = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 200)))
     os.environ.update(environment)
     child = subprocess.Popen(
-        [sys.executable, "-m", "helireach_ros.cli", "bringup", "--log-dir", log_dir, "--ros-args", *_NO_REPLANNING],
+        [
+            *(sys.executable, "-m", "helireach_ros.cli", "bringup", "--log-dir", log_dir, "--executor", executor),
+            *("--ros-args", *_NO_REPLANNING),
+        ],
         env=environment,
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
@@ -221,6 +226,7 @@ def main() -> None:
     parser.add_argument("--failures", type=int, default=40, help="failures per mode (>= 30)")
     parser.add_argument("--mode", choices=("both", "composed", "cross-process"), default="both")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="the system's executor")
     arguments = parser.parse_args()
     states = _states(arguments.failures, arguments.seed)
     print(
@@ -229,9 +235,11 @@ def main() -> None:
     )
     with tempfile.TemporaryDirectory() as log_dir:
         if arguments.mode in ("both", "composed"):
-            _report("composed (one process, multi-threaded executor)", run_composed(states, log_dir))
+            results = run_composed(states, log_dir, arguments.executor)
+            _report(f"composed (one process, {arguments.executor} executor)", results)
         if arguments.mode in ("both", "cross-process"):
-            _report("cross-process (helireach bringup in a child process)", run_cross_process(states, log_dir))
+            results = run_cross_process(states, log_dir, arguments.executor)
+            _report(f"cross-process (helireach bringup in a child process, {arguments.executor} executor)", results)
     print(
         f"\nstates: {Path(__file__).name} --seed {arguments.seed}: 50-800 ft x 0-115 kt, level flight, total power loss"
     )

@@ -39,6 +39,7 @@ __all__ = [
     "STATE_UNITS",
     "HelicopterState",
     "TrimCondition",
+    "clip_rotor_speed_noise",
     "dynamics_function",
     "initial_state_after_failure",
     "smooth_positive",
@@ -205,6 +206,24 @@ def initial_state_after_failure(
         raise ValueError(f"height must be finite, got {height!r}")
     trim = trim_level_flight(airframe, forward_speed)
     return HelicopterState(0.0, forward_speed, airframe.nominal_rotor_speed, height, 0.0, power_fraction * trim.power)
+
+
+def clip_rotor_speed_noise(airframe: Airframe, rotor_speed: float, tolerance_ratio: float = 0.01) -> float:
+    """A measured rotor speed with sensor noise across a rotor-speed limit taken back to the limit.
+
+    Noise can put Ω a hair outside its limits, where the landing NLP has no solution at all; only
+    ``tolerance_ratio`` × Ω₀ beyond a limit is clipped. A rotor truly outside its limits is returned
+    as measured (no safe plan exists): clipping it inside would plan with rotor energy the aircraft
+    does not have.
+    """
+    limits, omega0 = airframe.limits, airframe.nominal_rotor_speed
+    low, high = limits.min_rotor_speed_ratio * omega0, limits.max_rotor_speed_ratio * omega0
+    tolerance = tolerance_ratio * omega0
+    if low - tolerance <= rotor_speed < low:
+        return low
+    if high < rotor_speed <= high + tolerance:
+        return high
+    return rotor_speed
 
 
 def steady_autorotation(airframe: Airframe, forward_speed: float) -> tuple[float, float, float]:

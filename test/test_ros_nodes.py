@@ -28,7 +28,7 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros import ros_messages as rm
 from helireach_ros.bringup import build_system, ros_arguments
 from helireach_ros.envelope import default_envelope_path, load_envelope
-from helireach_ros.executors import create_executor
+from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS, create_executor
 from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.nodes.monitor import VehicleMonitor
 from helireach_ros.nodes.planner_node import LandingPlannerNode
@@ -54,11 +54,11 @@ def envelope():
 class Harness:
     """Nodes under test plus a probe node that publishes vehicle input and records everything."""
 
-    def __init__(self, context: Context, *nodes: Node) -> None:
+    def __init__(self, context: Context, *nodes: Node, executor: str = DEFAULT_EXECUTOR) -> None:
         self.context = context
         self.nodes = list(nodes)
         self.probe = Node("test_probe", context=context)
-        self.executor = create_executor("multi_threaded", context, num_threads=4)
+        self.executor = create_executor(executor, context)
         for node in [*self.nodes, self.probe]:
             self.executor.add_node(node)
         self.received: dict[str, list[Any]] = {}
@@ -271,9 +271,11 @@ def test_broken_parameter_is_reported_and_the_default_used(context: Context) -> 
 
 
 # --- failure → plan -------------------------------------------------------------------------------------------
-def planner_harness(context: Context, *overrides: Parameter) -> tuple[Harness, LandingPlannerNode]:
+def planner_harness(
+    context: Context, *overrides: Parameter, executor: str = DEFAULT_EXECUTOR
+) -> tuple[Harness, LandingPlannerNode]:
     planner = LandingPlannerNode(context=context, parameter_overrides=list(overrides))
-    return Harness(context, VehicleMonitor(context=context), planner), planner
+    return Harness(context, VehicleMonitor(context=context), planner, executor=executor), planner
 
 
 def trigger_failure(harness: Harness, height: float, speed: float) -> int:
@@ -287,8 +289,9 @@ def trigger_failure(harness: Harness, height: float, speed: float) -> int:
     return stamp
 
 
-def test_failure_publishes_a_verified_trajectory_path_and_status(context: Context) -> None:
-    harness, _ = planner_harness(context, Parameter("replan_period", value=0.0))
+@pytest.mark.parametrize("executor", EXECUTOR_KINDS)
+def test_failure_publishes_a_verified_trajectory_path_and_status(context: Context, executor: str) -> None:
+    harness, _ = planner_harness(context, Parameter("replan_period", value=0.0), executor=executor)
     trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
     paths = harness.listen(PathMsg, rm.TOPIC_LANDING_PATH)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
@@ -327,8 +330,12 @@ def test_failure_publishes_a_verified_trajectory_path_and_status(context: Contex
         harness.close()
 
 
-def test_missed_deadline_publishes_a_flagged_fallback_then_the_plan(context: Context) -> None:
-    harness, _ = planner_harness(context, Parameter("deadline", value=0.001), Parameter("replan_period", value=0.0))
+@pytest.mark.parametrize("executor", EXECUTOR_KINDS)
+def test_missed_deadline_publishes_a_flagged_fallback_then_the_plan(context: Context, executor: str) -> None:
+    """The solve runs on the planner's own thread, so even one executor thread publishes the fallback meanwhile."""
+    harness, _ = planner_harness(
+        context, Parameter("deadline", value=0.001), Parameter("replan_period", value=0.0), executor=executor
+    )
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
     try:
@@ -444,3 +451,8 @@ def test_best_effort_vehicle_publishers_are_accepted(context: Context) -> None:
         assert subscriptions and all(s.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for s in subscriptions)
     finally:
         harness.close()
+
+
+def test_an_unknown_executor_kind_is_refused() -> None:
+    with pytest.raises(ValueError, match="multi_threaded"):
+        create_executor("multi_threaded")

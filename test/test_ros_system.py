@@ -119,7 +119,7 @@ def test_a_replayed_failure_drives_fresh_nodes_to_the_logged_plan(demo, no_ros_d
     probe = Node("test_probe", context=context)
     trajectories: list[JointTrajectory] = []
     probe.create_subscription(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, trajectories.append, rm.LATCHED_QOS)
-    executor = create_executor("multi_threaded", context, num_threads=4)
+    executor = create_executor("single_threaded", context)
     for node in (monitor, planner, probe):
         executor.add_node(node)
     replay = threading.Thread(

@@ -49,6 +49,7 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import ros_messages as rm
+from helireach_ros.model import clip_rotor_speed_noise
 from helireach_ros.units import FT, KT
 
 __all__ = ["FallbackPlan", "LandingPlannerNode", "PublishedPlan", "main"]
@@ -272,16 +273,7 @@ class LandingPlannerNode(Node):
             rotor_speed, source, power = self.airframe.nominal_rotor_speed, "assumed_nominal", None
         if self._assume_total_power_loss or power is None:
             power = 0.0
-        # Sensor noise can put Ω a hair outside the rotor limits, where the NLP has no solution at all; only
-        # that much is clipped. A rotor truly outside its limits is planned from as measured (no safe plan
-        # exists): clipping it inside would plan with rotor energy the aircraft does not have.
-        limits, omega0 = self.airframe.limits, self.airframe.nominal_rotor_speed
-        low, high = limits.min_rotor_speed_ratio * omega0, limits.max_rotor_speed_ratio * omega0
-        tolerance = _ROTOR_NOISE_TOLERANCE * omega0
-        if low - tolerance <= rotor_speed < low:
-            rotor_speed = low
-        elif high < rotor_speed <= high + tolerance:
-            rotor_speed = high
+        rotor_speed = clip_rotor_speed_noise(self.airframe, rotor_speed, _ROTOR_NOISE_TOLERANCE)
         return rm.helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
 
     # -- the failure --------------------------------------------------------------------------------------------

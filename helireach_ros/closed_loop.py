@@ -1,0 +1,129 @@
+"""Closed-loop landing without ROS: the planner node's re-planning loop in simulated, lock-step time.
+
+After the failure the planner plans from the measured state, then re-plans every ``replan_period``
+from the current measurement, warm-started from its previous plan, until the vehicle is below
+``min_height`` or the current plan has less than ``min_remaining`` to go — the policy of
+:class:`~helireach_ros.nodes.planner_node.LandingPlannerNode`. Each plan is indexed from the time of
+the measurement it starts from and reaches the vehicle ``latency`` seconds later (solve, transport),
+as a :class:`~helireach_ros.simulation.ControlSchedule`; until then the vehicle flies the previous one.
+
+Unlike the real-time ROS system this is deterministic (seeded noise, fixed latency), so it measures
+what the closed loop tolerates: ``bench/closed_loop_latency.py`` sweeps the latency.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from helireach_ros.model import clip_rotor_speed_noise
+from helireach_ros.planner import LandingPlan, LandingPlanner
+from helireach_ros.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
+
+__all__ = ["ClosedLoopResult", "ClosedLoopSettings", "fly_closed_loop", "measured_state"]
+
+
+@dataclass(frozen=True)
+class ClosedLoopSettings:
+    """The re-planning policy (the planner node's parameters of the same names).
+
+    Attributes:
+        replan_period: s between plans.
+        latency: s from the measurement a plan starts from to the vehicle flying it.
+        min_height: m; no re-planning below.
+        min_remaining: s; no re-planning when the current plan has less time to go.
+        rotor_noise_tolerance: fraction of Ω₀ a measured rotor speed may lie outside its limits as noise.
+    """
+
+    replan_period: float = 0.25
+    latency: float = 0.05
+    min_height: float = 0.5
+    min_remaining: float = 0.3
+    rotor_noise_tolerance: float = 0.01
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.replan_period) and self.replan_period > 0.0):
+            raise ValueError(f"replan_period must be > 0, got {self.replan_period!r}")
+        if not (math.isfinite(self.latency) and self.latency >= 0.0):
+            raise ValueError(f"latency must be >= 0, got {self.latency!r}")
+
+
+@dataclass(frozen=True)
+class ClosedLoopResult:
+    """How a closed-loop descent ended.
+
+    Attributes:
+        touchdown: the vehicle's touchdown report.
+        plans: converged plans made (the first included).
+        failed_plans: solves that did not converge (the vehicle kept its current plan).
+        unsafe_plans: converged plans not called safe (value > 0 or the replay failed).
+    """
+
+    touchdown: TouchdownReport
+    plans: int
+    failed_plans: int
+    unsafe_plans: int
+
+
+def measured_state(measurement: Measurement, vehicle: SimulatedVehicle, rotor_noise_tolerance: float) -> np.ndarray:
+    """The planner's initial state (y, v, Ω, h, z, P = 0) from a measurement, as the planner node forms it."""
+    rotor_speed = clip_rotor_speed_noise(vehicle.nominal_airframe, measurement.rotor_speed, rotor_noise_tolerance)
+    return np.array(
+        [
+            -measurement.climb_rate,
+            measurement.forward_speed,
+            rotor_speed,
+            max(measurement.height, 0.0),
+            measurement.distance,
+            0.0,
+        ]
+    )
+
+
+def fly_closed_loop(
+    vehicle: SimulatedVehicle, planner: LandingPlanner, settings: ClosedLoopSettings | None = None
+) -> ClosedLoopResult:
+    """Flies the vehicle from its failure to the ground, re-planning as the planner node does.
+
+    Args:
+        vehicle: a vehicle before or at its failure (it is advanced to the failure first).
+        planner: built for the vehicle's nominal airframe.
+        settings: the re-planning policy.
+
+    Returns:
+        The touchdown and plan counts.
+    """
+    settings = settings or ClosedLoopSettings()
+    if not vehicle.engine_failed:
+        vehicle.advance(max(vehicle.scenario.failure_time - vehicle.time, 0.0))
+    pending: list[tuple[float, ControlSchedule]] = []  # (arrival time, schedule), in order
+    current: tuple[float, LandingPlan] | None = None  # (time it starts from, plan)
+    plans = failed = unsafe = 0
+    replanning = True
+    while not vehicle.landed:
+        now = vehicle.time
+        if replanning:
+            state = measured_state(vehicle.measure(), vehicle, settings.rotor_noise_tolerance)
+            remaining = current[1].time_to_land - (now - current[0]) if current is not None else math.inf
+            if state[3] < settings.min_height or remaining < settings.min_remaining:
+                replanning = False
+            else:
+                plan = planner.plan(state, current[1].warm_start if current is not None else None)
+                if plan.solver.success:
+                    plans += 1
+                    unsafe += not plan.safe
+                    current = (now, plan)
+                    pending.append((now + settings.latency, ControlSchedule.from_plan(plan, now)))
+                else:
+                    failed += 1
+        next_tick = now + settings.replan_period
+        while pending and pending[0][0] <= next_tick and not vehicle.landed:
+            arrival, schedule = pending.pop(0)
+            vehicle.advance(max(arrival - vehicle.time, 0.0))
+            vehicle.follow(schedule)
+        if not vehicle.landed:
+            vehicle.advance(max(next_tick - vehicle.time, 0.0))
+    assert vehicle.touchdown is not None
+    return ClosedLoopResult(vehicle.touchdown, plans, failed, unsafe)

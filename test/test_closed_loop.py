@@ -1,0 +1,58 @@
+"""The closed loop without ROS, in lock-step simulated time: what re-planning buys, and what latency costs.
+
+Deterministic (seeded noise, fixed latency): these fail on the planner's or the loop's behaviour, not on
+the machine's timing. The real-time ROS counterpart is test_ros_system's demo.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from helireach_ros.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
+from helireach_ros.planner import get_planner
+from helireach_ros.simulation import SimulatedVehicle, load_scenario
+
+
+@pytest.fixture(scope="module")
+def demo_scenario():
+    return load_scenario("demo_500ft_75kt")
+
+
+def test_re_planning_lands_the_mismatched_vehicle_within_limits(demo_scenario, airframe, settings) -> None:
+    """The demo's 5 % drag mismatch defeats a single plan (test_ros_simulation); re-planning at 4 Hz absorbs it."""
+    vehicle = SimulatedVehicle(demo_scenario, airframe, settings)
+    result = fly_closed_loop(vehicle, get_planner(airframe, settings), ClosedLoopSettings(latency=0.1))
+    assert result.touchdown.within_limits, result.touchdown.reason
+    assert result.plans >= 20 and result.failed_plans == 0 and result.unsafe_plans == 0
+    assert result.touchdown.descent_rate <= airframe.limits.max_descent_rate
+
+
+def test_a_second_of_plan_latency_breaks_the_closed_loop(demo_scenario, airframe, settings) -> None:
+    """Plans that arrive a second late are flown from states they were not made for: the margin is real."""
+    vehicle = SimulatedVehicle(dataclasses.replace(demo_scenario, seed=8), airframe, settings)
+    result = fly_closed_loop(vehicle, get_planner(airframe, settings), ClosedLoopSettings(latency=1.0))
+    assert not result.touchdown.within_limits
+
+
+def test_measured_state_clips_only_noise_across_a_rotor_limit(demo_scenario, airframe, settings) -> None:
+    vehicle = SimulatedVehicle(demo_scenario, airframe, settings)
+    measurement = vehicle.measure()
+    omega0 = airframe.nominal_rotor_speed
+    low = airframe.limits.min_rotor_speed_ratio * omega0
+    noisy = dataclasses.replace(measurement, rotor_speed=low - 0.005 * omega0)
+    slow = dataclasses.replace(measurement, rotor_speed=low - 0.05 * omega0)
+    assert measured_state(noisy, vehicle, 0.01)[2] == low
+    assert measured_state(slow, vehicle, 0.01)[2] == pytest.approx(low - 0.05 * omega0)
+    state = measured_state(measurement, vehicle, 0.01)
+    assert np.array_equal(state[[0, 1, 3]], [-measurement.climb_rate, measurement.forward_speed, measurement.height])
+    assert state[5] == 0.0  # total power loss is planned
+
+
+def test_bad_policies_are_refused() -> None:
+    with pytest.raises(ValueError, match="replan_period"):
+        ClosedLoopSettings(replan_period=0.0)
+    with pytest.raises(ValueError, match="latency"):
+        ClosedLoopSettings(latency=float("nan"))
