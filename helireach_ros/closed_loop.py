@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from helireach_ros.model import clip_rotor_speed_noise
+from helireach_ros.model import clip_rotor_speed_noise, state_from_sensors
 from helireach_ros.planner import LandingPlan, LandingPlanner
 from helireach_ros.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
 
@@ -70,15 +70,8 @@ class ClosedLoopResult:
 def measured_state(measurement: Measurement, vehicle: SimulatedVehicle, rotor_noise_tolerance: float) -> np.ndarray:
     """The planner's initial state (y, v, Ω, h, z, P = 0) from a measurement, as the planner node forms it."""
     rotor_speed = clip_rotor_speed_noise(vehicle.nominal_airframe, measurement.rotor_speed, rotor_noise_tolerance)
-    return np.array(
-        [
-            -measurement.climb_rate,
-            measurement.forward_speed,
-            rotor_speed,
-            max(measurement.height, 0.0),
-            measurement.distance,
-            0.0,
-        ]
+    return state_from_sensors(
+        measurement.height, measurement.forward_speed, measurement.climb_rate, rotor_speed, measurement.distance
     )
 
 

@@ -43,6 +43,7 @@ __all__ = [
     "dynamics_function",
     "initial_state_after_failure",
     "smooth_positive",
+    "state_from_sensors",
     "steady_autorotation",
     "trim_level_flight",
 ]
@@ -206,6 +207,23 @@ def initial_state_after_failure(
         raise ValueError(f"height must be finite, got {height!r}")
     trim = trim_level_flight(airframe, forward_speed)
     return HelicopterState(0.0, forward_speed, airframe.nominal_rotor_speed, height, 0.0, power_fraction * trim.power)
+
+
+def state_from_sensors(
+    height: float,
+    forward_speed: float,
+    climb_rate: float,
+    rotor_speed: float,
+    distance: float = 0.0,
+    engine_power: float = 0.0,
+) -> np.ndarray:
+    """The model state (y, v, Ω, h, z, P) from sensor readings, SI; y = −climb rate.
+
+    Negative heights and powers (sensor noise near zero) count as 0.
+    """
+    return np.array(
+        [-climb_rate, forward_speed, rotor_speed, max(height, 0.0), distance, max(engine_power, 0.0)], dtype=float
+    )
 
 
 def clip_rotor_speed_noise(airframe: Airframe, rotor_speed: float, tolerance_ratio: float = 0.01) -> float:

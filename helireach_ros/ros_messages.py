@@ -352,16 +352,11 @@ def state_problems(
 
 
 def helicopter_state(odometry: OdometryReading, rotor_speed: float, engine_power: float = 0.0) -> np.ndarray:
-    """The model state (y, v, Ω, h, z, P) from readings; negative heights (sensor noise) count as 0."""
-    return np.array(
-        [
-            -odometry.climb_rate,
-            odometry.forward_speed,
-            rotor_speed,
-            max(odometry.height, 0.0),
-            odometry.distance,
-            max(engine_power, 0.0),
-        ]
+    """The model state (y, v, Ω, h, z, P) from readings (:func:`~helireach_ros.model.state_from_sensors`)."""
+    from helireach_ros.model import state_from_sensors
+
+    return state_from_sensors(
+        odometry.height, odometry.forward_speed, odometry.climb_rate, rotor_speed, odometry.distance, engine_power
     )
 
 
@@ -540,10 +535,14 @@ def run_node(node_class: Callable[[], Node], args: list[str] | None = None) -> N
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
 
     from helireach_ros.executors import DEFAULT_EXECUTOR, create_executor
 
-    rclpy.init(args=args)
+    # rclpy's own SIGINT and SIGTERM handlers wake the blocked executor and make spin() raise, so the
+    # node is destroyed (the recorder finishes its log); a Python signal.signal() handler would only
+    # run after the wait returned.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     node = None
     try:
         node = node_class()

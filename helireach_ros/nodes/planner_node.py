@@ -184,8 +184,8 @@ class LandingPlannerNode(Node):
             rm.EVENT_QOS,
             **rm.NO_QOS_EVENTS_SUBSCRIPTION,
         )
-        # A periodic check, never cancelled or reset from another thread (cancelling a timer that a
-        # multi-threaded executor is about to fire raises inside the executor). Every half deadline:
+        # A periodic check, never cancelled or reset from the solver thread (cancelling a timer that the
+        # executor is about to fire raises inside the executor). Every half deadline:
         # the fallback goes out within 1.5 deadlines without waking the executor needlessly.
         self.create_timer(max(self._deadline / 2.0, 0.005), self._on_deadline)
         if self._replan_period > 0.0:

@@ -21,12 +21,9 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
-import rclpy
 from rcl_interfaces.msg import ParameterDescriptor
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.topic_endpoint_info import TopicEndpointInfo
@@ -246,20 +243,8 @@ class McapRecorder(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    """Run the recorder until SIGINT/SIGTERM, then finish the log."""
-    # rclpy's own handlers (SIGINT and SIGTERM) wake the blocked executor and make spin() raise;
-    # a Python signal.signal() handler would only run after the wait returned.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
-    node = None
-    try:
-        node = McapRecorder()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    """Run the recorder until SIGINT/SIGTERM, then finish the log (destroying the node closes it)."""
+    rm.run_node(McapRecorder, args)
 
 
 if __name__ == "__main__":
