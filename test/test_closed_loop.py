@@ -56,3 +56,19 @@ def test_bad_policies_are_refused() -> None:
         ClosedLoopSettings(replan_period=0.0)
     with pytest.raises(ValueError, match="latency"):
         ClosedLoopSettings(latency=float("nan"))
+
+
+def test_planning_with_todays_weight_absorbs_what_re_planning_cannot(demo_scenario, airframe, settings) -> None:
+    """5 % more gross weight than the airframe file: re-planning with the file's weight lands outside the
+    limits; the planner told today's weight (the node's ``gross_weight`` parameter) lands within them."""
+    heavy = dataclasses.replace(demo_scenario, parameter_mismatch={"gross_weight": 0.05})
+    policy = ClosedLoopSettings(latency=0.1)
+    with_file_weight = fly_closed_loop(
+        SimulatedVehicle(heavy, airframe, settings), get_planner(airframe, settings), policy
+    )
+    todays_airframe = airframe.with_conditions(gross_weight=1.05 * airframe.gross_weight)
+    with_todays_weight = fly_closed_loop(
+        SimulatedVehicle(heavy, airframe, settings), get_planner(todays_airframe, settings), policy
+    )
+    assert not with_file_weight.touchdown.within_limits
+    assert with_todays_weight.touchdown.within_limits, with_todays_weight.touchdown.reason

@@ -26,6 +26,7 @@ from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import ros_messages as rm
+from helireach_ros.airframe import load_airframe
 from helireach_ros.bringup import build_system, ros_arguments
 from helireach_ros.envelope import default_envelope_path, load_envelope
 from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS, create_executor
@@ -456,3 +457,21 @@ def test_best_effort_vehicle_publishers_are_accepted(context: Context) -> None:
 def test_an_unknown_executor_kind_is_refused() -> None:
     with pytest.raises(ValueError, match="multi_threaded"):
         create_executor("multi_threaded")
+
+
+def test_todays_weight_rebuilds_the_model_and_refuses_the_envelope_made_for_another(context: Context) -> None:
+    weight = 1.05 * load_airframe("uh60a_class").gross_weight
+    harness, planner = planner_harness(
+        context, Parameter("gross_weight", value=weight), Parameter("replan_period", value=0.0)
+    )
+    trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
+    plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
+    try:
+        assert planner.airframe.gross_weight == pytest.approx(weight)
+        assert planner.envelope is None  # the shipped one was made for the file's weight
+        trigger_failure(harness, 500 * FT, 75 * KT)
+        assert harness.spin_until(lambda: trajectories and any(s.level == DiagnosticStatus.OK for s in plan_statuses))
+        fields = rm.status_values(plan_statuses[-1])
+        assert (fields["fallback"], fields["warm_start"]) == ("false", "none")
+    finally:
+        harness.close()

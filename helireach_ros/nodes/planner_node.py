@@ -112,7 +112,8 @@ class _Failure:
 class LandingPlannerNode(Node):
     """Plans landings after engine failures and re-plans during the descent.
 
-    Parameters: ``airframe``, ``planner_settings`` (file, '' = config/planner.yaml), ``envelope_file``
+    Parameters: ``airframe``, ``gross_weight`` (N, 0 = the airframe file's), ``density_altitude`` (m, NaN = the
+    file's), ``planner_settings`` (file, '' = config/planner.yaml), ``envelope_file``
     ('' = the shipped one, ``none`` = no envelope), ``deadline`` (s), ``replan_period`` (s, 0 = off),
     ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s),
     ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``.
@@ -122,6 +123,10 @@ class LandingPlannerNode(Node):
         super().__init__("helireach_planner", **node_options)
         declare = partial(rm.declare_checked_parameter, self)
         airframe_name = declare("airframe", "uh60a_class", "airframe name or file")
+        gross_weight = declare("gross_weight", 0.0, "today's gross weight, N (0 = the airframe file's)", (0.0, 1e7))
+        density_altitude = declare(
+            "density_altitude", math.nan, "today's density altitude, m (NaN = the airframe file's)"
+        )
         settings_file = declare("planner_settings", "", "planner settings file ('' = config/planner.yaml)")
         envelope_file = declare("envelope_file", "", "envelope for warm starts/fallbacks ('' = shipped, 'none' = off)")
         self._deadline = declare("deadline", 0.25, "fallback if no plan this long after the failure, s", (0.001, 60.0))
@@ -151,7 +156,8 @@ class LandingPlannerNode(Node):
         self.envelope: Any | None = None
         self._setup_error = ""
         try:
-            self._setup_core(airframe_name, settings_file, envelope_file, warm_up)
+            conditions = (gross_weight or None, None if math.isnan(density_altitude) else density_altitude)
+            self._setup_core(airframe_name, conditions, settings_file, envelope_file, warm_up)
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
@@ -193,7 +199,14 @@ class LandingPlannerNode(Node):
         self.create_timer(diagnostics_period, self._publish_diagnostics)
 
     # -- startup -----------------------------------------------------------------------------------------------
-    def _setup_core(self, airframe_name: str, settings_file: str, envelope_file: str, warm_up: bool) -> None:
+    def _setup_core(
+        self,
+        airframe_name: str,
+        conditions: tuple[float | None, float | None],
+        settings_file: str,
+        envelope_file: str,
+        warm_up: bool,
+    ) -> None:
         """Loads airframe, settings and envelope, builds the NLP (once) and warms it up."""
         from helireach_ros.airframe import load_airframe
         from helireach_ros.model import initial_state_after_failure
@@ -201,7 +214,9 @@ class LandingPlannerNode(Node):
         from helireach_ros.settings import load_settings
 
         started = time.perf_counter()
-        self.airframe = load_airframe(airframe_name)
+        # Today's weight and density altitude change the model, so the NLP and the matching envelope
+        # (an envelope made for other conditions is refused: cold starts, autorotation-entry fallback).
+        self.airframe = load_airframe(airframe_name).with_conditions(*conditions)
         self.settings = load_settings(settings_file or None)
         self.planner = get_planner(self.airframe, self.settings)
         self.envelope, self._envelope_note = self._load_envelope(envelope_file)
