@@ -172,12 +172,17 @@ def _recorder_metadata(system_nodes: Mapping[str, Node | None], command: str) ->
         "software_version": __version__,
         "command": command,
         "airframe": getattr(getattr(planner, "airframe", None), "name", "unknown"),
-        "airframe_digest": planner.airframe.digest() if getattr(planner, "planner", None) is not None else "",
         "envelope_id": status.envelope.envelope_id if status.envelope is not None else "",
-        "planner_settings": json.dumps(dataclasses.asdict(planner.settings), sort_keys=True)
-        if getattr(planner, "planner", None) is not None
-        else "",
+        "airframe_digest": "",
+        "planner_settings": "",
     }
+    if getattr(planner, "planner", None) is not None:  # configured: the model and settings it plans with
+        metadata.update(
+            airframe_digest=planner.airframe.digest(),
+            gross_weight_n=repr(planner.airframe.gross_weight),
+            density_altitude_m=repr(planner.airframe.density_altitude),
+            planner_settings=json.dumps(dataclasses.asdict(planner.settings), sort_keys=True),
+        )
     if sim is not None:
         metadata["scenario"] = sim.scenario.name
         metadata["scenario_json"] = json.dumps(sim.scenario.as_dict(), sort_keys=True)

@@ -127,6 +127,8 @@ def compare_logged_plans(
     if "planner_settings" not in recorded or "airframe" not in recorded:
         raise ValueError(f"{path}: the log's metadata names no airframe/planner settings (not a bringup log?)")
     airframe = load_airframe(recorded["airframe"])
+    if recorded.get("gross_weight_n") and recorded.get("density_altitude_m"):  # the planner node's conditions
+        airframe = airframe.with_conditions(float(recorded["gross_weight_n"]), float(recorded["density_altitude_m"]))
     if recorded.get("airframe_digest") and recorded["airframe_digest"] != airframe.digest():
         raise ValueError(f"{path}: airframe {airframe.name!r} differs from the logged one (digest)")
     settings = PlannerSettings(**json.loads(recorded["planner_settings"]))

@@ -501,6 +501,8 @@ class LandingPlannerNode(Node):
             "initial_distance_m": state[4],
             "initial_engine_power_w": state[5],
             "airframe": self.airframe.name,
+            "gross_weight_n": self.airframe.gross_weight,
+            "density_altitude_m": self.airframe.density_altitude,
             "envelope_id": self.envelope.envelope_id if self.envelope is not None else "",
         }
 
