@@ -244,16 +244,15 @@ def build_system(
             overrides = [Parameter("log_dir", value=str(log_dir))] if log_dir is not None else []
             recorder = McapRecorder(metadata=metadata, context=context, parameter_overrides=overrides)
             created.append(recorder)
+        spinner = create_executor(executor, context)
     except BaseException:
         for node in reversed(created):
             node.destroy_node()
         rclpy.try_shutdown(context=context)
         raise
-    system = HelireachSystem(
-        context, create_executor(executor, context), monitor, envelope_status, planner, sim, recorder, extra
-    )
+    system = HelireachSystem(context, spinner, monitor, envelope_status, planner, sim, recorder, extra)
     for node in system.nodes:
-        system.executor.add_node(node)
+        spinner.add_node(node)
     return system
 
 

@@ -214,8 +214,8 @@ class LandingPlannerNode(Node):
         from helireach_ros.settings import load_settings
 
         started = time.perf_counter()
-        # Today's weight and density altitude change the model, so the NLP and the matching envelope
-        # (an envelope made for other conditions is refused: cold starts, autorotation-entry fallback).
+        # Today's weight and density altitude change the model, hence the NLP and which envelope matches
+        # (one made for other conditions is refused: cold starts, autorotation-entry fallback).
         self.airframe = load_airframe(airframe_name).with_conditions(*conditions)
         self.settings = load_settings(settings_file or None)
         self.planner = get_planner(self.airframe, self.settings)
@@ -625,6 +625,7 @@ class LandingPlannerNode(Node):
             "warm_up_ms": self.warm_up_ms,
             "envelope": self._envelope_note,
             "failures": self._failure_count,
+            "solving": self.solving,
         }
         if failure is not None:
             values.update(failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed)

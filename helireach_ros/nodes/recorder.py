@@ -237,7 +237,7 @@ class McapRecorder(Node):
         try:
             self._writer.write(topic, data, log_time, source or log_time)
         except McapLogError:
-            # A callback racing close() on another executor thread: the log is already finished.
+            # A callback racing close() (a stop signal, another executor thread): the log is already finished.
             if not self._writer.closed:
                 raise
 
