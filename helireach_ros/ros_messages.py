@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -524,6 +525,32 @@ def declare_checked_parameter(
     except ParameterException as error:
         node.get_logger().error(f"parameter {name!r} rejected ({error}); using the default {default!r}")
         return node.declare_parameter(name, default, descriptor, ignore_override=True).value
+
+
+def declare_aircraft(node: Node) -> Callable[[], Any]:
+    """Declares the aircraft parameters shared by the planner and the envelope status node.
+
+    ``airframe`` (name or file), ``gross_weight`` (N, 0 = the airframe file's) and ``density_altitude``
+    (m, NaN = the file's): config/nodes.yaml keeps them in its ``/**`` section so one bare
+    ``-p gross_weight:=…`` sets them for every node, and the plans and the status describe the same aircraft.
+
+    Returns:
+        A function loading that :class:`~helireach_ros.airframe.Airframe` (raises ``ConfigError`` on a bad
+        file or out-of-range conditions), so each node decides what a broken configuration means for it.
+    """
+    declare = partial(declare_checked_parameter, node)
+    name = declare("airframe", "uh60a_class", "airframe name or file")
+    gross_weight = declare("gross_weight", 0.0, "today's gross weight, N (0 = the airframe file's)", (0.0, 1e7))
+    density_altitude = declare("density_altitude", math.nan, "today's density altitude, m (NaN = the file's)")
+
+    def load() -> Any:
+        from helireach_ros.airframe import load_airframe
+
+        return load_airframe(name).with_conditions(
+            gross_weight or None, None if math.isnan(density_altitude) else density_altitude
+        )
+
+    return load
 
 
 def run_node(node_class: Callable[[], Node], args: list[str] | None = None) -> None:

@@ -475,3 +475,17 @@ def test_todays_weight_rebuilds_the_model_and_refuses_the_envelope_made_for_anot
         assert (fields["fallback"], fields["warm_start"]) == ("false", "none")
     finally:
         harness.close()
+
+
+def test_the_status_node_refuses_an_envelope_made_for_another_weight(context: Context) -> None:
+    """The shipped envelope is for the file's weight: 5 % heavier, its SAFE answers would be optimistic."""
+    weight = 1.05 * load_airframe("uh60a_class").gross_weight
+    status = EnvelopeStatusNode(context=context, parameter_overrides=[Parameter("gross_weight", value=weight)])
+    harness = Harness(context, VehicleMonitor(context=context), status)
+    statuses = harness.listen(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS)
+    try:
+        assert status.envelope is None and status.aircraft.gross_weight == pytest.approx(weight)
+        assert harness.keep_publishing(500 * FT, 75 * KT, until=level_is(statuses, DiagnosticStatus.STALE))
+        assert "no envelope" in statuses[-1].message and "W = 16800 lbf" in statuses[-1].message  # today's weight
+    finally:
+        harness.close()

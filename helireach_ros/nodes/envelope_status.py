@@ -107,13 +107,16 @@ def evaluate_safety(
 class EnvelopeStatusNode(Node):
     """Publishes the safety status of the current state against an H-V envelope.
 
-    Parameters: ``envelope_file`` ('' = shipped; settable at run time), ``warn_margin`` (ft/kt units;
+    Parameters: ``airframe``, ``gross_weight``, ``density_altitude`` (the aircraft today, shared with the
+    planner: :func:`~helireach_ros.ros_messages.declare_aircraft`; an envelope made for another aircraft is
+    refused), ``envelope_file`` ('' = shipped; settable at run time), ``warn_margin`` (ft/kt units;
     settable), ``stale_timeout`` (s), ``publish_period`` (s), ``diagnostics_period`` (s).
     """
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_envelope_status", **node_options)
         declare = partial(rm.declare_checked_parameter, self)
+        load_aircraft = rm.declare_aircraft(self)
         envelope_file = declare("envelope_file", "", "H-V envelope file ('' = the shipped one)", read_only=False)
         self._warn_margin = declare(
             "warn_margin", 20.0, "WARN below this distance to the boundary (ft/kt units)", (0.0, 1e4), read_only=False
@@ -126,6 +129,13 @@ class EnvelopeStatusNode(Node):
         self._envelope: Any | None = None
         self._envelope_error = ""
         self._envelope_path = ""
+        # The envelope must be for the aircraft the planner flies today (same parameters as the planner):
+        # a status read off an envelope made for a lighter aircraft would be optimistic.
+        try:
+            self.aircraft: Any | None = load_aircraft()
+            self._aircraft_error = ""
+        except Exception as error:  # a broken airframe file or conditions: STALE with the reason, never a crash
+            self.aircraft, self._aircraft_error = None, f"aircraft not configured ({type(error).__name__}: {error})"
         self._reading: rm.OdometryReading | None = None
         self._received_ns = 0
         self._last_published: tuple[bytes, str] | None = None
@@ -161,8 +171,10 @@ class EnvelopeStatusNode(Node):
         try:
             from helireach_ros.envelope import default_envelope_path, load_envelope
 
+            if self.aircraft is None:
+                raise RuntimeError(self._aircraft_error)
             resolved = path or str(default_envelope_path())
-            envelope, error = load_envelope(resolved), ""
+            envelope, error = load_envelope(resolved, self.aircraft), ""
             self.get_logger().info(f"envelope {envelope.envelope_id} loaded from {resolved}: {envelope!r}")
         except Exception as exc:  # a missing module, file or a corrupt one: STALE, never a crash
             resolved = path or "(shipped envelope)"

@@ -122,11 +122,7 @@ class LandingPlannerNode(Node):
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_planner", **node_options)
         declare = partial(rm.declare_checked_parameter, self)
-        airframe_name = declare("airframe", "uh60a_class", "airframe name or file")
-        gross_weight = declare("gross_weight", 0.0, "today's gross weight, N (0 = the airframe file's)", (0.0, 1e7))
-        density_altitude = declare(
-            "density_altitude", math.nan, "today's density altitude, m (NaN = the airframe file's)"
-        )
+        load_aircraft = rm.declare_aircraft(self)
         settings_file = declare("planner_settings", "", "planner settings file ('' = config/planner.yaml)")
         envelope_file = declare("envelope_file", "", "envelope for warm starts/fallbacks ('' = shipped, 'none' = off)")
         self._deadline = declare("deadline", 0.25, "fallback if no plan this long after the failure, s", (0.001, 60.0))
@@ -156,8 +152,7 @@ class LandingPlannerNode(Node):
         self.envelope: Any | None = None
         self._setup_error = ""
         try:
-            conditions = (gross_weight or None, None if math.isnan(density_altitude) else density_altitude)
-            self._setup_core(airframe_name, conditions, settings_file, envelope_file, warm_up)
+            self._setup_core(load_aircraft, settings_file, envelope_file, warm_up)
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
@@ -200,15 +195,9 @@ class LandingPlannerNode(Node):
 
     # -- startup -----------------------------------------------------------------------------------------------
     def _setup_core(
-        self,
-        airframe_name: str,
-        conditions: tuple[float | None, float | None],
-        settings_file: str,
-        envelope_file: str,
-        warm_up: bool,
+        self, load_aircraft: Callable[[], Any], settings_file: str, envelope_file: str, warm_up: bool
     ) -> None:
         """Loads airframe, settings and envelope, builds the NLP (once) and warms it up."""
-        from helireach_ros.airframe import load_airframe
         from helireach_ros.model import initial_state_after_failure
         from helireach_ros.planner import get_planner
         from helireach_ros.settings import load_settings
@@ -216,7 +205,7 @@ class LandingPlannerNode(Node):
         started = time.perf_counter()
         # Today's weight and density altitude change the model, hence the NLP and which envelope matches
         # (one made for other conditions is refused: cold starts, autorotation-entry fallback).
-        self.airframe = load_airframe(airframe_name).with_conditions(*conditions)
+        self.airframe = load_aircraft()
         self.settings = load_settings(settings_file or None)
         self.planner = get_planner(self.airframe, self.settings)
         self.envelope, self._envelope_note = self._load_envelope(envelope_file)
