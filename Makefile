@@ -18,7 +18,7 @@ $(STAMP): requirements.txt setup.py
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m helireach_ros.demo --out $(OUT)
+	$(BIN)/python -m helireach_ros.cli.demo --out $(OUT)
 
 test: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench

@@ -15,7 +15,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={package_name: ["web/*"]},
+    package_data={package_name + ".display": ["web/*"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
@@ -34,14 +34,14 @@ setup(
     tests_require=["pytest"],
     entry_points={
         "console_scripts": [
-            "helireach = helireach_ros.cli:main",
-            "helireach_monitor = helireach_ros.nodes.monitor:main",
-            "helireach_envelope_status = helireach_ros.nodes.envelope_status:main",
-            "helireach_planner = helireach_ros.nodes.planner_node:main",
-            "helireach_sim_vehicle = helireach_ros.nodes.sim_vehicle:main",
-            "helireach_recorder = helireach_ros.nodes.recorder:main",
-            "helireach_display = helireach_ros.nodes.display:main",
-            "helireach_replay = helireach_ros.log_replay:main",
+            "helireach = helireach_ros.cli.main:main",
+            "helireach_monitor = helireach_ros.ros.nodes.monitor:main",
+            "helireach_envelope_status = helireach_ros.ros.nodes.envelope_status:main",
+            "helireach_planner = helireach_ros.ros.nodes.planner_node:main",
+            "helireach_sim_vehicle = helireach_ros.ros.nodes.sim_vehicle:main",
+            "helireach_recorder = helireach_ros.ros.nodes.recorder:main",
+            "helireach_display = helireach_ros.display.node:main",
+            "helireach_replay = helireach_ros.ros.replay:main",
         ],
     },
 )

@@ -4,7 +4,7 @@ Run: .venv/bin/python bench/closed_loop_latency.py [--scenario demo_500ft_75kt] 
      [--latencies 0.05 0.1 0.2 0.3 0.4 0.5 0.6 0.8 1.0] [--replan-period 0.25]
 
 For each latency and noise seed it flies the scenario with
-:func:`~helireach_ros.closed_loop.fly_closed_loop` (the planner node's re-planning policy in lock-step
+:func:`~helireach_ros.core.closed_loop.fly_closed_loop` (the planner node's re-planning policy in lock-step
 simulated time: every plan reaches the vehicle ``latency`` seconds after the measurement it starts
 from) and prints the touchdown descent rate, forward speed, the rotor-speed range in flight and the
 verdict against the landing limits. The real-time ROS system's latency is measured by
@@ -18,12 +18,12 @@ import argparse
 import dataclasses
 import time
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.planner import get_planner
-from helireach_ros.settings import load_settings
-from helireach_ros.simulation import SimulatedVehicle, load_scenario
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.settings import load_settings
+from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.units import FT, KT
 
 
 def main() -> None:

@@ -19,19 +19,14 @@ import time
 
 import numpy as np
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.envelope import STATUS_CODES
-from helireach_ros.envelope_compute import (
-    EnvelopeJob,
-    _solve_point,
-    _warm_start_of,
-    compute_envelope,
-    make_executor,
-    parse_range,
-)
-from helireach_ros.planner import get_planner
-from helireach_ros.settings import load_settings
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.envelope.compute import EnvelopeJob, _solve_point, _warm_start_of, compute_envelope
+from helireach_ros.core.envelope.data import STATUS_CODES
+from helireach_ros.core.envelope.grid import parse_range
+from helireach_ros.core.envelope.workers import make_executor
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.settings import load_settings
+from helireach_ros.core.units import FT, KT
 
 
 def _run(job: EnvelopeJob, workers: int) -> None:

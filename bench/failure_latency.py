@@ -44,10 +44,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.bringup import build_system
-from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
-from helireach_ros.units import FT, KT
+from helireach_ros.core.units import FT, KT
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.bringup import build_system
+from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
 _NO_REPLANNING = ["-p", "helireach_planner:replan_period:=0.0"]
 _SETTLE_S = 0.15  # state streamed before each failure (the planner keeps only the latest)
@@ -172,7 +172,7 @@ def run_cross_process(states: list[tuple[float, float]], log_dir: str, executor:
     os.environ.update(environment)
     child = subprocess.Popen(
         [
-            *(sys.executable, "-m", "helireach_ros.cli", "bringup", "--log-dir", log_dir, "--executor", executor),
+            *(sys.executable, "-m", "helireach_ros.cli.main", "bringup", "--log-dir", log_dir, "--executor", executor),
             *("--ros-args", *_NO_REPLANNING),
         ],
         env=environment,

@@ -15,11 +15,11 @@ import time
 
 import numpy as np
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.model import initial_state_after_failure
-from helireach_ros.planner import get_planner
-from helireach_ros.settings import PlannerSettings
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.units import FT, KT
 
 VARIANTS = {
     "paper N=24 c=3 (paper)": PlannerSettings(method="paper", paper_points=24, paper_time_scale=3.0),

@@ -12,8 +12,8 @@ import os
 
 import pytest
 
-from helireach_ros.airframe import Airframe, load_airframe
-from helireach_ros.settings import PlannerSettings, load_settings
+from helireach_ros.core.airframe import Airframe, load_airframe
+from helireach_ros.core.settings import PlannerSettings, load_settings
 
 _NEXT_DOMAIN = itertools.count()
 _DOMAIN_COUNT = 200  # ids 1..200 are valid for every RMW on Linux

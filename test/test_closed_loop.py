@@ -11,9 +11,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from helireach_ros.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
-from helireach_ros.planner import get_planner
-from helireach_ros.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
 
 
 @pytest.fixture(scope="module")

@@ -6,9 +6,9 @@ import math
 import pytest
 import yaml
 
-from helireach_ros.airframe import ConfigError, isa_density, load_airframe, parse_airframe
-from helireach_ros.resources import config_path
-from helireach_ros.settings import PlannerSettings, load_settings
+from helireach_ros.core.airframe import ConfigError, isa_density, load_airframe, parse_airframe
+from helireach_ros.core.resources import config_path
+from helireach_ros.core.settings import PlannerSettings, load_settings
 
 
 @pytest.fixture(scope="module")

@@ -46,19 +46,13 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.airframe import load_airframe
-from helireach_ros.envelope import default_envelope_path, load_envelope
-from helireach_ros.nodes.display import (
-    CockpitDisplay,
-    DisplayServerError,
-    banner_level,
-    boundary_segments,
-    path_section,
-    rotor_limits_section,
-    web_directory,
-)
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.units import FT, KT
+from helireach_ros.display.node import CockpitDisplay
+from helireach_ros.display.sections import banner_level, boundary_segments, path_section, rotor_limits_section
+from helireach_ros.display.server import DisplayServerError, web_directory
+from helireach_ros.ros import messages as rm
 
 REPO = Path(__file__).resolve().parents[1]
 CHROMIUM_NAMES = ("chromium", "chromium-browser", "google-chrome-stable", "google-chrome")
@@ -397,8 +391,8 @@ def isolated_dds(no_ros_discovery: None) -> None:
 
 @pytest.fixture(scope="module")
 def real_plan() -> Any:
-    from helireach_ros.model import initial_state_after_failure
-    from helireach_ros.planner import plan_landing
+    from helireach_ros.core.model import initial_state_after_failure
+    from helireach_ros.core.planner import plan_landing
 
     airframe = load_airframe("uh60a_class")
     plan = plan_landing(initial_state_after_failure(airframe, 500 * FT, 75 * KT), airframe)
@@ -579,8 +573,8 @@ def envelope_points(envelope: Any, warn_margin: float) -> tuple[tuple[float, flo
 
 @needs_chromium
 def test_page_follows_the_real_status_node(browser: Browser, envelope_file: Path, tmp_path: Path) -> None:
-    from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
-    from helireach_ros.nodes.monitor import VehicleMonitor
+    from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
+    from helireach_ros.ros.nodes.monitor import VehicleMonitor
 
     harness = RosHarness(vehicle_topic="/vehicle/odometry", envelope_file=str(envelope_file))
     try:
@@ -626,7 +620,7 @@ class StatusOnlyPublisher(Node):
 def test_display_command_link_quiet_hold_and_lost(
     browser: Browser, envelope_file: Path, localhost_ros_domain: int
 ) -> None:
-    command = [sys.executable, "-m", "helireach_ros.cli", "display", "--port", "0", "--stale-after", "2"]
+    command = [sys.executable, "-m", "helireach_ros.cli.main", "display", "--port", "0", "--stale-after", "2"]
     command += ["--envelope", str(envelope_file), "--hold"]
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, cwd=REPO)
     context = Context()

@@ -16,8 +16,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.envelope import (
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
+from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION,
     STATUS_CODES,
@@ -27,11 +28,11 @@ from helireach_ros.envelope import (
     read_envelope_file,
     save_envelope,
 )
-from helireach_ros.envelope_compute import EnvelopeJob, compute_envelope, parse_list, parse_range
-from helireach_ros.envelope_plot import boundary_geometry, plot_envelope
-from helireach_ros.model import initial_state_after_failure
-from helireach_ros.planner import get_planner
-from helireach_ros.units import FT, KT
+from helireach_ros.core.envelope.grid import parse_list, parse_range
+from helireach_ros.core.envelope.plot import boundary_geometry, plot_envelope
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.units import FT, KT
 
 HEIGHTS_FT = "0:600:4"
 SPEEDS_KT = "0:60:3"
@@ -67,7 +68,7 @@ def assert_same_results(first: Envelope, second: Envelope) -> None:
 
 def run_cli(*arguments: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "helireach_ros.cli", *arguments], capture_output=True, text=True, timeout=timeout
+        [sys.executable, "-m", "helireach_ros.cli.main", *arguments], capture_output=True, text=True, timeout=timeout
     )
 
 
@@ -350,7 +351,7 @@ def test_local_processes_via_cli_equal_the_serial_run(small, tmp_path):
 
 def test_dask_cluster_run_equals_the_local_run(small, small_job, tmp_path):
     distributed = pytest.importorskip("distributed")
-    from helireach_ros.envelope_compute import make_executor
+    from helireach_ros.core.envelope.workers import make_executor
 
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:  # fmt: skip
@@ -365,7 +366,7 @@ def test_dask_cluster_run_equals_the_local_run(small, small_job, tmp_path):
 
 def test_ctrl_c_leaves_a_partial_file_and_resume_finishes_it(small, tmp_path):
     out = tmp_path / "interrupted.npz"
-    command = [sys.executable, "-m", "helireach_ros.cli", "envelope", "compute", "--heights-ft", HEIGHTS_FT,
+    command = [sys.executable, "-m", "helireach_ros.cli.main", "envelope", "compute", "--heights-ft", HEIGHTS_FT,
                "--speeds-kt", SPEEDS_KT, "--workers", "1", "--out", str(out)]  # fmt: skip
     process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
@@ -409,7 +410,8 @@ def test_sweep_over_weights_writes_one_file_per_combination(airframe, tmp_path):
 
 
 def test_progress_draws_a_bar_on_a_terminal_and_lines_otherwise():
-    from helireach_ros.envelope_compute import Progress, make_executor
+    from helireach_ros.core.envelope.progress import Progress
+    from helireach_ros.core.envelope.workers import make_executor
 
     terminal, log = io.StringIO(), io.StringIO()
     for stream, interactive in ((terminal, True), (log, False)):

@@ -12,12 +12,12 @@ import itertools
 import numpy as np
 import pytest
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.envelope import default_envelope_path, load_envelope
-from helireach_ros.model import initial_state_after_failure
-from helireach_ros.planner import get_planner
-from helireach_ros.settings import load_settings
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.settings import load_settings
+from helireach_ros.core.units import FT, KT
 
 
 @pytest.fixture(scope="module")

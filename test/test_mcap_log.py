@@ -36,8 +36,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from helireach_ros.log_replay import replay_log
-from helireach_ros.mcap_log import (
+from helireach_ros.core.mcap_log import (
     McapLogError,
     McapLogWriter,
     QosDescription,
@@ -46,7 +45,8 @@ from helireach_ros.mcap_log import (
     read_log_metadata,
     read_log_topics,
 )
-from helireach_ros.nodes.recorder import McapRecorder, qos_profile
+from helireach_ros.ros.nodes.recorder import McapRecorder, qos_profile
+from helireach_ros.ros.replay import replay_log
 
 REPO = Path(__file__).resolve().parents[1]
 LATCHED = QosDescription("reliable", "transient_local", 1)
@@ -130,7 +130,7 @@ def start_recorder(env: dict[str, str], log_dir: Path, *params: str) -> subproce
     for param in params:
         args += ["-p", param]
     return subprocess.Popen(
-        [sys.executable, "-m", "helireach_ros.nodes.recorder", "--ros-args", *args],
+        [sys.executable, "-m", "helireach_ros.ros.nodes.recorder", "--ros-args", *args],
         cwd=REPO,
         env=env,
         stdout=subprocess.PIPE,
@@ -552,7 +552,7 @@ def test_replay_command_line(tmp_path: Path) -> None:
     log = tmp_path / "flight.mcap"
     write_log(log)
     env = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="OFF")
-    command = [sys.executable, "-m", "helireach_ros.log_replay"]
+    command = [sys.executable, "-m", "helireach_ros.ros.replay"]
     done = subprocess.run(
         [*command, str(log), "--rate", "0", "--topics", ODOM], cwd=REPO, env=env, capture_output=True, timeout=30
     )

@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.model import (
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.model import (
     dynamics_function,
     initial_state_after_failure,
     steady_autorotation,
     trim_level_flight,
 )
-from helireach_ros.units import FT, KT
+from helireach_ros.core.units import FT, KT
 
 
 @pytest.fixture(scope="module")

@@ -9,7 +9,7 @@ import pytest
 
 def _helireach(*arguments: str) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "helireach_ros.cli", *arguments], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "helireach_ros.cli.main", *arguments], capture_output=True, text=True, timeout=120
     )
 
 

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from helireach_ros.airframe import load_airframe
-from helireach_ros.model import initial_state_after_failure
-from helireach_ros.planner import WarmStart, get_planner, plan_landing
-from helireach_ros.settings import PlannerSettings
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import WarmStart, get_planner, plan_landing
+from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.units import FT, KT
 
 
 @pytest.fixture(scope="module")

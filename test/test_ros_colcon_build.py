@@ -70,7 +70,7 @@ def test_colcon_build_installs_the_package_its_scripts_and_data(tmp_path: Path) 
         [
             sys.executable,
             "-c",
-            "import helireach_ros.resources as r; print(r.__file__); print(r.config_path('nodes.yaml'))",
+            "import helireach_ros.core.resources as r; print(r.__file__); print(r.config_path('nodes.yaml'))",
         ],
         cwd=tmp_path,
         capture_output=True,

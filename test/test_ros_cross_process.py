@@ -23,9 +23,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.mcap_log import read_log, read_log_topics
-from helireach_ros.units import FT, KT
+from helireach_ros.core.mcap_log import read_log, read_log_topics
+from helireach_ros.core.units import FT, KT
+from helireach_ros.ros import messages as rm
 
 TIMEOUT_S = 40.0
 
@@ -45,7 +45,7 @@ def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_l
     localhost_ros_domain, tmp_path
 ) -> None:
     process = subprocess.Popen(
-        [sys.executable, "-m", "helireach_ros.cli", "bringup", "--log-dir", str(tmp_path)],
+        [sys.executable, "-m", "helireach_ros.cli.main", "bringup", "--log-dir", str(tmp_path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,

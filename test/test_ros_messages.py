@@ -12,8 +12,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.envelope import StoredPlan
+from helireach_ros.core.envelope.data import StoredPlan
+from helireach_ros.ros import messages as rm
 
 MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"
 

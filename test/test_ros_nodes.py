@@ -25,15 +25,15 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.airframe import load_airframe
-from helireach_ros.bringup import build_system, ros_arguments
-from helireach_ros.envelope import default_envelope_path, load_envelope
-from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS, create_executor
-from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
-from helireach_ros.nodes.monitor import VehicleMonitor
-from helireach_ros.nodes.planner_node import LandingPlannerNode
-from helireach_ros.units import FT, KT
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.units import FT, KT
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.bringup import build_system, ros_arguments
+from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS, create_executor
+from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
+from helireach_ros.ros.nodes.monitor import VehicleMonitor
+from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 
 TIMEOUT_S = 10.0
 OMEGA0 = 27.0  # uh60a_class nominal rotor speed, rad/s (only used as a plausible measured value)

@@ -24,17 +24,17 @@ from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros import __version__
-from helireach_ros import ros_messages as rm
-from helireach_ros.bringup import ros_arguments
-from helireach_ros.cli import main as helireach_main
-from helireach_ros.demo import run_demo, summary
-from helireach_ros.executors import create_executor
-from helireach_ros.log_replay import replay_log
-from helireach_ros.mcap_log import read_log, read_log_metadata
-from helireach_ros.nodes.monitor import VehicleMonitor
-from helireach_ros.nodes.planner_node import LandingPlannerNode
-from helireach_ros.ros_cli import compare_logged_plans
-from helireach_ros.simulation import piecewise_linear_controls
+from helireach_ros.cli.demo import run_demo, summary
+from helireach_ros.cli.main import main as helireach_main
+from helireach_ros.core.mcap_log import read_log, read_log_metadata
+from helireach_ros.core.simulation import piecewise_linear_controls
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.bringup import ros_arguments
+from helireach_ros.ros.executors import create_executor
+from helireach_ros.ros.nodes.monitor import VehicleMonitor
+from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
+from helireach_ros.ros.plan_comparison import compare_logged_plans
+from helireach_ros.ros.replay import replay_log
 
 VEHICLE_TOPICS = [rm.TOPIC_ODOMETRY, rm.TOPIC_ROTOR, rm.TOPIC_ENGINE_FAILURE]
 

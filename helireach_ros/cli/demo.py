@@ -11,7 +11,7 @@ Writes ``<out>/hv_diagram.png`` (the H-V diagram with the flown track), ``<out>/
 Exits 0 only if the landing met the limits. ``--hold`` keeps the nodes running after touchdown
 (the cockpit display page, served by default, stays up with them) until Ctrl-C.
 
-Run: ``python -m helireach_ros.demo --out out [--hold] [--no-display] [--scenario NAME]``.
+Run: ``python -m helireach_ros.cli.demo --out out [--hold] [--no-display] [--scenario NAME]``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from helireach_ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
+from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
 __all__ = ["DemoResult", "main", "run_demo"]
 
@@ -39,8 +39,8 @@ class DemoResult:
 
     Attributes:
         status_before_failure: the last safety verdict while cruising (level name, message) or None.
-        touchdown: the vehicle's :class:`~helireach_ros.simulation.TouchdownReport` (None on timeout).
-        first_plan: the first published plan record (:class:`~helireach_ros.nodes.planner_node.PublishedPlan`).
+        touchdown: the vehicle's :class:`~helireach_ros.core.simulation.TouchdownReport` (None on timeout).
+        first_plan: the first published plan record (:class:`~helireach_ros.core.failure_episode.PublishedPlan`).
         plans: every plan published for the failure.
         log_path: the MCAP log.
         message_count: messages recorded.
@@ -80,14 +80,14 @@ def run_demo(
     executor: str = DEFAULT_EXECUTOR,
 ) -> DemoResult:
     """Runs the demo (see the module docstring) and returns what it produced."""
-    from helireach_ros.bringup import build_system
-    from helireach_ros.ros_messages import LEVEL_NAMES
+    from helireach_ros.ros.bringup import build_system
+    from helireach_ros.ros.messages import LEVEL_NAMES
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     extra = []
     if display:
-        from helireach_ros.nodes.display import create_display_with_fallback
+        from helireach_ros.display.node import create_display_with_fallback
 
         extra.append(create_display_with_fallback)
     result = DemoResult()
@@ -99,7 +99,7 @@ def run_demo(
         extra_nodes=extra,
         context=context,
         executor=executor,
-        command="python -m helireach_ros.demo",
+        command="python -m helireach_ros.cli.demo",
     )
     sim, planner, status = system.sim, system.planner, system.envelope_status
     assert sim is not None
@@ -144,12 +144,12 @@ def run_demo(
 def _write_figures(out: Path, result: DemoResult, envelope: Any) -> list[Path]:
     written = []
     if envelope is not None and len(result.track):
-        from helireach_ros.envelope_plot import plot_envelope
+        from helireach_ros.core.envelope.plot import plot_envelope
 
         written.append(plot_envelope(envelope, out / "hv_diagram.png", track=result.track, title_extra="flown track"))
     plan = result.first_plan.plan if result.first_plan is not None else None
     if plan is not None and hasattr(plan, "replay"):
-        from helireach_ros.plan_plot import plot_landing_plan
+        from helireach_ros.core.plan_plot import plot_landing_plan
 
         written.append(plot_landing_plan(plan, out / "landing_plan.png"))
     return written
@@ -157,7 +157,7 @@ def _write_figures(out: Path, result: DemoResult, envelope: Any) -> list[Path]:
 
 def summary(result: DemoResult) -> str:
     """The human-readable summary (feet, knots, percent)."""
-    from helireach_ros.units import FT, KT
+    from helireach_ros.core.units import FT, KT
 
     scenario, limits = result.scenario, result.limits
     mismatch = ", ".join(f"{name} {fraction:+.0%}" for name, fraction in scenario.parameter_mismatch.items()) or "none"
@@ -207,7 +207,7 @@ def summary(result: DemoResult) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m helireach_ros.demo``; exits 0 only if the landing met the limits."""
+    """``python -m helireach_ros.cli.demo``; exits 0 only if the landing met the limits."""
     parser = argparse.ArgumentParser(prog="helireach-demo", description=__doc__.split("\n\n")[0])
     parser.add_argument("--out", default="out", help="folder for the figures and the MCAP log")
     parser.add_argument("--scenario", default=None, help="simulated scenario (default: demo_500ft_75kt)")

@@ -3,7 +3,7 @@
 The page is at ``http://127.0.0.1:8080/`` by default; only an explicit ``--bind`` makes it listen on anything
 but loopback. ``--hold`` keeps the page up after Ctrl-C/SIGTERM stops ROS (last data shown, banner NO DATA,
 marked held) until a second Ctrl-C/SIGTERM. Options left out keep the node's parameter defaults
-(see :class:`helireach_ros.nodes.display.CockpitDisplay`).
+(see :class:`helireach_ros.display.node.CockpitDisplay`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ def run(arguments: argparse.Namespace) -> int:
     """Handler of ``helireach display``; returns the exit code (1 if the page cannot be served)."""
     from rclpy.parameter import Parameter
 
-    from helireach_ros.nodes.display import run_display
+    from helireach_ros.display.node import run_display
 
     given = {
         "port": arguments.port,

@@ -77,20 +77,14 @@ def _error(message: str) -> int:
 
 
 def _compute(arguments: argparse.Namespace) -> int:
-    from helireach_ros.airframe import ConfigError, load_airframe
-    from helireach_ros.envelope import EnvelopeError
-    from helireach_ros.envelope_compute import (
-        ComputeInterrupted,
-        EnvelopeJob,
-        Progress,
-        compute_envelope,
-        condition_file_name,
-        make_executor,
-        parse_list,
-        parse_range,
-    )
-    from helireach_ros.settings import load_settings
-    from helireach_ros.units import FT, KT, LBF
+    from helireach_ros.core.airframe import ConfigError, load_airframe
+    from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelope
+    from helireach_ros.core.envelope.data import EnvelopeError
+    from helireach_ros.core.envelope.grid import condition_file_name, parse_list, parse_range
+    from helireach_ros.core.envelope.progress import Progress
+    from helireach_ros.core.envelope.workers import make_executor
+    from helireach_ros.core.settings import load_settings
+    from helireach_ros.core.units import FT, KT, LBF
 
     try:
         airframe = load_airframe(arguments.airframe)
@@ -160,7 +154,7 @@ def _compute(arguments: argparse.Namespace) -> int:
 
 
 def _is_partial(path: Path) -> bool:
-    from helireach_ros.envelope import EnvelopeError, read_envelope_file
+    from helireach_ros.core.envelope.data import EnvelopeError, read_envelope_file
 
     try:
         return not read_envelope_file(path, allow_partial=True).complete
@@ -169,13 +163,13 @@ def _is_partial(path: Path) -> bool:
 
 
 def _query(arguments: argparse.Namespace) -> int:
-    from helireach_ros.envelope import EnvelopeError, load_envelope
-    from helireach_ros.units import FT, KT
+    from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
+    from helireach_ros.core.units import FT, KT
 
     try:
         airframe = None
         if arguments.airframe:
-            from helireach_ros.airframe import ConfigError, load_airframe
+            from helireach_ros.core.airframe import ConfigError, load_airframe
 
             try:
                 airframe = load_airframe(arguments.airframe)
@@ -204,8 +198,8 @@ def _query(arguments: argparse.Namespace) -> int:
 
 
 def _plot(arguments: argparse.Namespace) -> int:
-    from helireach_ros.envelope import EnvelopeError, load_envelope
-    from helireach_ros.envelope_plot import plot_envelope
+    from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
+    from helireach_ros.core.envelope.plot import plot_envelope
 
     try:
         envelope = load_envelope(arguments.file)

@@ -16,10 +16,11 @@ from helireach_ros import __version__
 __all__ = ["SUBCOMMAND_MODULES", "build_parser", "main"]
 
 SUBCOMMAND_MODULES = (
-    "helireach_ros.plan_cli",
-    "helireach_ros.envelope_cli",
-    "helireach_ros.ros_cli",
-    "helireach_ros.display_cli",
+    "helireach_ros.cli.plan",
+    "helireach_ros.cli.envelope",
+    "helireach_ros.cli.bringup",
+    "helireach_ros.cli.replay",
+    "helireach_ros.cli.display",
 )
 
 

@@ -35,11 +35,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_plan(arguments: argparse.Namespace) -> int:
     """Handler of ``helireach plan``; returns 0 if safe, 1 if not, 2 on bad input."""
-    from helireach_ros.airframe import ConfigError, load_airframe
-    from helireach_ros.model import initial_state_after_failure
-    from helireach_ros.planner import plan_landing
-    from helireach_ros.settings import load_settings
-    from helireach_ros.units import FT, KT, LBF
+    from helireach_ros.core.airframe import ConfigError, load_airframe
+    from helireach_ros.core.model import initial_state_after_failure
+    from helireach_ros.core.planner import plan_landing
+    from helireach_ros.core.settings import load_settings
+    from helireach_ros.core.units import FT, KT, LBF
 
     try:
         for name in ("height_ft", "speed_kt", "power_fraction"):
@@ -59,7 +59,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
         return 2
 
     if arguments.plot:
-        from helireach_ros.plan_plot import plot_landing_plan
+        from helireach_ros.core.plan_plot import plot_landing_plan
 
         plot_landing_plan(plan, arguments.plot)
     if arguments.json:

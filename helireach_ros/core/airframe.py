@@ -17,8 +17,8 @@ from typing import Any
 
 import yaml
 
-from helireach_ros.resources import config_path
-from helireach_ros.units import UnitError, convert_to_si
+from helireach_ros.core.resources import config_path
+from helireach_ros.core.units import UnitError, convert_to_si
 
 __all__ = [
     "Airframe",

@@ -3,9 +3,10 @@
 After the failure the planner plans from the measured state, then re-plans every ``replan_period``
 from the current measurement, warm-started from its previous plan, until the vehicle is below
 ``min_height`` or the current plan has less than ``min_remaining`` to go — the policy of
-:class:`~helireach_ros.nodes.planner_node.LandingPlannerNode`. Each plan is indexed from the time of
+:class:`~helireach_ros.ros.nodes.planner_node.LandingPlannerNode`
+(:mod:`helireach_ros.core.replanning`). Each plan is indexed from the time of
 the measurement it starts from and reaches the vehicle ``latency`` seconds later (solve, transport),
-as a :class:`~helireach_ros.simulation.ControlSchedule`; until then the vehicle flies the previous one.
+as a :class:`~helireach_ros.core.simulation.ControlSchedule`; until then the vehicle flies the previous one.
 
 Unlike the real-time ROS system this is deterministic (seeded noise, fixed latency), so it measures
 what the closed loop tolerates: ``bench/closed_loop_latency.py`` sweeps the latency.
@@ -18,9 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from helireach_ros.model import clip_rotor_speed_noise, state_from_sensors
-from helireach_ros.planner import LandingPlan, LandingPlanner
-from helireach_ros.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
+from helireach_ros.core.model import clip_rotor_speed_noise, state_from_sensors
+from helireach_ros.core.planner import LandingPlan, LandingPlanner
+from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
+from helireach_ros.core.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
 
 __all__ = ["ClosedLoopResult", "ClosedLoopSettings", "fly_closed_loop", "measured_state"]
 
@@ -99,8 +101,8 @@ def fly_closed_loop(
         now = vehicle.time
         if replanning:
             state = measured_state(vehicle.measure(), vehicle, settings.rotor_noise_tolerance)
-            remaining = current[1].time_to_land - (now - current[0]) if current is not None else math.inf
-            if state[3] < settings.min_height or remaining < settings.min_remaining:
+            remaining = plan_time_remaining(current[1].time_to_land, now - current[0]) if current else math.inf
+            if replanning_ends(state[3], remaining, settings.min_height, settings.min_remaining):
                 replanning = False
             else:
                 plan = planner.plan(state, current[1].warm_start if current is not None else None)

@@ -31,7 +31,7 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from helireach_ros.airframe import Airframe
+from helireach_ros.core.airframe import Airframe
 
 __all__ = [
     "CONTROL_NAMES",

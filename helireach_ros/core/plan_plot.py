@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from helireach_ros.planner import LandingPlan
-from helireach_ros.units import FT, KT
+from helireach_ros.core.planner import LandingPlan
+from helireach_ros.core.units import FT, KT
 
 __all__ = ["plot_landing_plan"]
 

@@ -1,7 +1,7 @@
 """Landing plans: solve the reachability NLP for a state, replay it, and say what it means.
 
 ``plan_landing(state, airframe, settings)`` is the library's entry point. A plan is ``safe`` only
-when the NLP value is ≤ 0 **and** the independent replay (:mod:`helireach_ros.verification`) lands
+when the NLP value is ≤ 0 **and** the independent replay (:mod:`helireach_ros.core.verification`) lands
 within limits; a plan whose NLP says safe but whose replay does not land is ``unverified``, never
 safe. Solvers are built once per (airframe, settings) and cached; a previous plan's solution can
 warm-start the next solve.
@@ -17,14 +17,14 @@ from typing import Any
 
 import numpy as np
 
-from helireach_ros.airframe import Airframe
-from helireach_ros.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState
-from helireach_ros.settings import PlannerSettings
-from helireach_ros.transcription import SUCCESS_STATUSES, Transcription, terminal_cost
-from helireach_ros.transcription_paper import PaperTranscription
-from helireach_ros.transcription_verified import VerifiedTranscription
-from helireach_ros.units import FT, KT
-from helireach_ros.verification import ReplaySummary, control_function, replay_plan
+from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState
+from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.transcription.base import SUCCESS_STATUSES, Transcription, terminal_cost
+from helireach_ros.core.transcription.paper import PaperTranscription
+from helireach_ros.core.transcription.verified import VerifiedTranscription
+from helireach_ros.core.units import FT, KT
+from helireach_ros.core.verification import ReplaySummary, control_function, replay_plan
 
 __all__ = [
     "STATUSES",
@@ -73,7 +73,7 @@ class LandingPlan:
         time_to_land: s.
         times: node times, s; ``states`` are the NLP's states there (6 × len(times)).
         control_times, control_values, control_interpolation: the control function (see
-            :class:`~helireach_ros.transcription.DecodedPlan`); :meth:`controls_at` evaluates it.
+            :class:`~helireach_ros.core.transcription.base.DecodedPlan`); :meth:`controls_at` evaluates it.
         replay: the independent ODE check.
         solver: IPOPT statistics.
         nominal_rotor_speed: Ω₀ of the airframe, rad/s (for rotor speed in percent).
@@ -284,7 +284,7 @@ def plan_landing(
 
     Args:
         state: (y, v, Ω, h, z, P) in SI, e.g. from
-            :func:`~helireach_ros.model.initial_state_after_failure`.
+            :func:`~helireach_ros.core.model.initial_state_after_failure`.
         airframe: the helicopter.
         settings: transcription and solver settings (default: the ``verified`` method).
         warm_start: a previous plan's ``warm_start`` for the same airframe and settings.

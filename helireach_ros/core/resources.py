@@ -11,9 +11,14 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["PACKAGE_NAME", "config_path", "share_directories"]
+__all__ = ["PACKAGE_NAME", "config_path", "share_directories", "source_root"]
 
 PACKAGE_NAME = "helireach_ros"
+
+
+def source_root() -> Path:
+    """The source tree's root (the folder holding ``config/``) when running from a checkout."""
+    return Path(__file__).resolve().parents[2]
 
 
 def share_directories() -> list[Path]:
@@ -26,7 +31,7 @@ def share_directories() -> list[Path]:
     except Exception:
         pass
     candidates.append(Path(sys.prefix) / "share" / PACKAGE_NAME)
-    candidates.append(Path(__file__).resolve().parent.parent)
+    candidates.append(source_root())
     return [path for path in candidates if path.is_dir()]
 
 

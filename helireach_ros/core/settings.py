@@ -9,8 +9,8 @@ from typing import Any
 
 import yaml
 
-from helireach_ros.airframe import ConfigError
-from helireach_ros.resources import config_path
+from helireach_ros.core.airframe import ConfigError
+from helireach_ros.core.resources import config_path
 
 __all__ = ["METHODS", "PlannerSettings", "load_settings"]
 

@@ -1,7 +1,7 @@
 """A simulated helicopter for closed-loop tests: the planner's model with a mismatch, noise and a scenario.
 
-ROS-free; :mod:`helireach_ros.nodes.sim_vehicle` wraps it in a node. The vehicle integrates the same
-model the planner uses (:func:`~helireach_ros.model.dynamics_function`, through the replay's CVODES
+ROS-free; :mod:`helireach_ros.ros.nodes.sim_vehicle` wraps it in a node. The vehicle integrates the same
+model the planner uses (:func:`~helireach_ros.core.model.dynamics_function`, through the replay's CVODES
 segment integrator), but with its own airframe — the nominal one with some parameters scaled by
 ``1 + fraction`` (the *parameter mismatch*) — so a plan made for the nominal airframe does not fly
 exactly as predicted, which is what closed-loop re-planning has to absorb. Sensors add seeded
@@ -13,7 +13,7 @@ engine time constant; the vehicle follows the latest control schedule, holding t
 until the first one arrives) and ``landed`` (ground contact, h = 0).
 
 Touchdown is ground contact (h = 0). The landing met the limits when, at contact, the planner's
-landing cost (:func:`~helireach_ros.transcription.terminal_cost`) J = max(|y|/y_max, |v|/v_max) − 1
+landing cost (:func:`~helireach_ros.core.transcription.base.terminal_cost`) J = max(|y|/y_max, |v|/v_max) − 1
 is ≤ 0, and Ω stayed within its limits (plus the replay's margin) in flight: from the failure until
 the vehicle entered the planner's touchdown set (J ≤ 0 with |h| ≤ h_tol, the paper's landing
 conditions), after which the rotor's energy is no longer needed.
@@ -35,13 +35,13 @@ from typing import Any
 import numpy as np
 import yaml
 
-from helireach_ros.airframe import Airframe, ConfigError, load_airframe
-from helireach_ros.model import trim_level_flight
-from helireach_ros.resources import config_path
-from helireach_ros.settings import PlannerSettings
-from helireach_ros.transcription import terminal_cost
-from helireach_ros.units import FT, KT, UnitError, convert_to_si
-from helireach_ros.verification import segment_integrator
+from helireach_ros.core.airframe import Airframe, ConfigError, load_airframe
+from helireach_ros.core.model import trim_level_flight
+from helireach_ros.core.resources import config_path
+from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.transcription.base import terminal_cost
+from helireach_ros.core.units import FT, KT, UnitError, convert_to_si
+from helireach_ros.core.verification import segment_integrator
 
 __all__ = [
     "HOLD_STEP_S",

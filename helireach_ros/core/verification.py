@@ -26,10 +26,10 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from helireach_ros.airframe import Airframe
-from helireach_ros.model import STATE_NAMES, dynamics_function
-from helireach_ros.settings import PlannerSettings
-from helireach_ros.transcription import DecodedPlan, terminal_cost
+from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.model import STATE_NAMES, dynamics_function
+from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.transcription.base import DecodedPlan, terminal_cost
 
 __all__ = ["ReplaySummary", "control_function", "replay_plan", "segment_integrator"]
 

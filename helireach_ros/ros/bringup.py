@@ -5,7 +5,7 @@ There is no ``ros2 launch`` with the PyPI wheels; this is the ros2/examples ``co
 files, which win), creates the monitor, envelope status and planner nodes, optionally the simulated
 vehicle and any extra nodes (e.g. the cockpit display), and last the MCAP recorder, whose metadata
 names the airframe, envelope, software version and scenario. One single-threaded executor spins
-them all by default (:mod:`helireach_ros.executors`); the planner solves on its own thread, so no
+them all by default (:mod:`helireach_ros.ros.executors`); the planner solves on its own thread, so no
 callback blocks the others.
 
 ``helireach bringup [--params-file F] [--with-sim] [--executor KIND]`` (:func:`run_bringup`) spins
@@ -35,13 +35,13 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from helireach_ros import __version__
-from helireach_ros.executors import DEFAULT_EXECUTOR, create_executor
-from helireach_ros.nodes.envelope_status import EnvelopeStatusNode
-from helireach_ros.nodes.monitor import VehicleMonitor
-from helireach_ros.nodes.planner_node import LandingPlannerNode
-from helireach_ros.nodes.recorder import McapRecorder
-from helireach_ros.nodes.sim_vehicle import SimVehicleNode
-from helireach_ros.resources import config_path
+from helireach_ros.core.resources import config_path
+from helireach_ros.ros.executors import DEFAULT_EXECUTOR, create_executor
+from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
+from helireach_ros.ros.nodes.monitor import VehicleMonitor
+from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
+from helireach_ros.ros.nodes.recorder import McapRecorder
+from helireach_ros.ros.nodes.sim_vehicle import SimVehicleNode
 
 __all__ = [
     "DEFAULT_EXECUTOR",
@@ -212,7 +212,7 @@ def build_system(
         extra_nodes: factories called with the node options (``context=...``), e.g. the display class.
         context: a fresh context to initialise (default: a new one).
         ros_args: further ROS arguments (e.g. ``["-p", "helireach_planner:deadline:=0.1"]``).
-        executor: the executor kind (:data:`~helireach_ros.executors.EXECUTOR_KINDS`).
+        executor: the executor kind (:data:`~helireach_ros.ros.executors.EXECUTOR_KINDS`).
         command: recorded in the log's metadata.
     """
     context = context if context is not None else Context()

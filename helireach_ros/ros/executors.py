@@ -1,6 +1,6 @@
 """Executors for the helireach nodes: which one spins them.
 
-The composed system (:mod:`helireach_ros.bringup`, the demo) and the per-node console scripts take an
+The composed system (:mod:`helireach_ros.ros.bringup`, the demo) and the per-node console scripts take an
 executor *kind*:
 
 - ``single_threaded`` (the default): rclpy's ``SingleThreadedExecutor``. No helireach callback blocks
@@ -14,14 +14,19 @@ callbacks and starves every other thread of the GIL. Under it the composed demo'
 up to 1.8 s late, and with the planner's solver thread the failure-latency bench got no plan at all
 within 10 s (README, "Failure to trajectory").
 
-rclpy is imported on first use, so command-line parsers can offer the kinds cheaply.
+rclpy is imported on first use, so command-line parsers can offer the kinds cheaply. :func:`run_node` is the
+body of every node's ``main`` (ros2/demos style).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
-__all__ = ["DEFAULT_EXECUTOR", "EXECUTOR_KINDS", "create_executor"]
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
+__all__ = ["DEFAULT_EXECUTOR", "EXECUTOR_KINDS", "create_executor", "run_node"]
 
 EXECUTOR_KINDS = ("single_threaded", "events")
 """The executor kinds :func:`create_executor` accepts."""
@@ -51,3 +56,32 @@ def create_executor(kind: str, context: Any = None) -> Any:
 
         return SingleThreadedExecutor(context=context)
     raise ValueError(f"unknown executor kind {kind!r}; expected one of {', '.join(EXECUTOR_KINDS)}")
+
+
+def run_node(node_class: Callable[[], Node], args: list[str] | None = None) -> None:
+    """The body of a node's ``main``: init, spin until Ctrl-C or SIGTERM, destroy, shut down (ros2/demos style).
+
+    Args:
+        node_class: builds the node (called after ``rclpy.init``).
+        args: command-line arguments (default ``sys.argv``).
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+    from rclpy.signals import SignalHandlerOptions
+
+    # rclpy's own SIGINT and SIGTERM handlers wake the blocked executor and make spin() raise, so the
+    # node is destroyed (the recorder finishes its log); a Python signal.signal() handler would only
+    # run after the wait returned.
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
+    node = None
+    try:
+        node = node_class()
+        executor = create_executor(DEFAULT_EXECUTOR)
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()

@@ -12,7 +12,7 @@ Conventions (REP-103, SI on the wire; see ``msg_docs/`` for each topic):
 * ``trajectory_msgs/JointTrajectory`` of the landing: joints ``collective_thrust_coefficient`` (C_T)
   and ``pitch_angle`` (θ, rad), ``time_from_start`` from the plan's initial state, whose stamp is the
   header stamp. Zero-order-hold controls are encoded exactly with two points per interval
-  (:func:`~helireach_ros.simulation.piecewise_linear_controls`): linear interpolation between the
+  (:func:`~helireach_ros.core.simulation.piecewise_linear_controls`): linear interpolation between the
   points reproduces the plan.
 * ``diagnostic_msgs/DiagnosticStatus``: ``values`` are strings; numbers in SI with the unit in the
   key (``height_m``), written with :func:`format_value` (round-trip precision).
@@ -21,9 +21,8 @@ Conventions (REP-103, SI on the wire; see ``msg_docs/`` for each topic):
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
-from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -32,21 +31,19 @@ from builtin_interfaces.msg import Time as TimeMsg
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Quaternion
 from nav_msgs.msg import Odometry, Path
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
-from rclpy.exceptions import ParameterException
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from helireach_ros.simulation import piecewise_linear_controls
+from helireach_ros.core.simulation import piecewise_linear_controls
 
 __all__ = [
     "COLLECTIVE_JOINT",
     "DEFAULT_BODY_FRAME",
     "DEFAULT_WORLD_FRAME",
+    "DIAGNOSTIC_LEVELS",
     "EVENT_QOS",
     "LATCHED_QOS",
     "LEVEL_NAMES",
@@ -73,7 +70,6 @@ __all__ = [
     "RotorReading",
     "StateLimits",
     "TopicSpec",
-    "declare_checked_parameter",
     "diagnostic_array",
     "diagnostic_status",
     "duration_message",
@@ -89,7 +85,6 @@ __all__ = [
     "read_rotor",
     "read_trajectory",
     "rotor_message",
-    "run_node",
     "stamp_message",
     "stamp_nanoseconds",
     "state_problems",
@@ -191,6 +186,8 @@ LEVEL_NAMES = {
     DiagnosticStatus.STALE: "STALE",
 }
 """Human names of the DiagnosticStatus levels (which are ``bytes`` in rclpy)."""
+#: DiagnosticStatus level per name (the core's verdicts name their level).
+DIAGNOSTIC_LEVELS = {name: level for level, name in LEVEL_NAMES.items()}
 
 
 # --- time ---------------------------------------------------------------------------------------------------
@@ -353,8 +350,8 @@ def state_problems(
 
 
 def helicopter_state(odometry: OdometryReading, rotor_speed: float, engine_power: float = 0.0) -> np.ndarray:
-    """The model state (y, v, Ω, h, z, P) from readings (:func:`~helireach_ros.model.state_from_sensors`)."""
-    from helireach_ros.model import state_from_sensors
+    """The model state (y, v, Ω, h, z, P) from readings (:func:`~helireach_ros.core.model.state_from_sensors`)."""
+    from helireach_ros.core.model import state_from_sensors
 
     return state_from_sensors(
         odometry.height, odometry.forward_speed, odometry.climb_rate, rotor_speed, odometry.distance, engine_power
@@ -367,7 +364,7 @@ def trajectory_message(plan: Any, stamp_ns: int, frame_id: str = DEFAULT_BODY_FR
 
     Args:
         plan: anything with ``control_times``, ``control_values``, ``control_interpolation``
-            (a :class:`~helireach_ros.planner.LandingPlan` or an envelope's stored plan).
+            (a :class:`~helireach_ros.core.planner.LandingPlan` or an envelope's stored plan).
         stamp_ns: the stamp of the state the plan starts from.
         frame_id: the vehicle frame the pitch angle refers to.
     """
@@ -495,90 +492,3 @@ def diagnostic_array(stamp_ns: int, *statuses: DiagnosticStatus) -> DiagnosticAr
 def failure_flag(engine_failed: bool) -> Bool:
     """The ``/vehicle/engine_failure`` message."""
     return Bool(data=bool(engine_failed))
-
-
-# --- parameters -----------------------------------------------------------------------------------------------
-def declare_checked_parameter(
-    node: Node,
-    name: str,
-    default: Any,
-    description: str,
-    value_range: tuple[float, float] | None = None,
-    read_only: bool = True,
-) -> Any:
-    """Declares a parameter with a descriptor (and range); a bad override is logged and the default used.
-
-    A broken parameter file must not stop a safety node: the error names the parameter, the rejected
-    value and the default that applies instead.
-    """
-    descriptor = ParameterDescriptor(description=description, read_only=read_only)
-    if value_range is not None and isinstance(default, bool):
-        raise TypeError("a boolean parameter has no range")
-    if value_range is not None and isinstance(default, int):
-        descriptor.integer_range = [IntegerRange(from_value=int(value_range[0]), to_value=int(value_range[1]), step=1)]
-    elif value_range is not None:
-        descriptor.floating_point_range = [
-            FloatingPointRange(from_value=float(value_range[0]), to_value=float(value_range[1]))
-        ]
-    try:
-        return node.declare_parameter(name, default, descriptor).value
-    except ParameterException as error:
-        node.get_logger().error(f"parameter {name!r} rejected ({error}); using the default {default!r}")
-        return node.declare_parameter(name, default, descriptor, ignore_override=True).value
-
-
-def declare_aircraft(node: Node) -> Callable[[], Any]:
-    """Declares the aircraft parameters shared by the planner and the envelope status node.
-
-    ``airframe`` (name or file), ``gross_weight`` (N, 0 = the airframe file's) and ``density_altitude``
-    (m, NaN = the file's): config/nodes.yaml keeps them in its ``/**`` section so one bare
-    ``-p gross_weight:=…`` sets them for every node, and the plans and the status describe the same aircraft.
-
-    Returns:
-        A function loading that :class:`~helireach_ros.airframe.Airframe` (raises ``ConfigError`` on a bad
-        file or out-of-range conditions), so each node decides what a broken configuration means for it.
-    """
-    declare = partial(declare_checked_parameter, node)
-    name = declare("airframe", "uh60a_class", "airframe name or file")
-    gross_weight = declare("gross_weight", 0.0, "today's gross weight, N (0 = the airframe file's)", (0.0, 1e7))
-    density_altitude = declare("density_altitude", math.nan, "today's density altitude, m (NaN = the file's)")
-
-    def load() -> Any:
-        from helireach_ros.airframe import load_airframe
-
-        return load_airframe(name).with_conditions(
-            gross_weight or None, None if math.isnan(density_altitude) else density_altitude
-        )
-
-    return load
-
-
-def run_node(node_class: Callable[[], Node], args: list[str] | None = None) -> None:
-    """The body of a node's ``main``: init, spin until Ctrl-C or SIGTERM, destroy, shut down (ros2/demos style).
-
-    Args:
-        node_class: builds the node (called after ``rclpy.init``).
-        args: command-line arguments (default ``sys.argv``).
-    """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException
-    from rclpy.signals import SignalHandlerOptions
-
-    from helireach_ros.executors import DEFAULT_EXECUTOR, create_executor
-
-    # rclpy's own SIGINT and SIGTERM handlers wake the blocked executor and make spin() raise, so the
-    # node is destroyed (the recorder finishes its log); a Python signal.signal() handler would only
-    # run after the wait returned.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
-    node = None
-    try:
-        node = node_class()
-        executor = create_executor(DEFAULT_EXECUTOR)
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()

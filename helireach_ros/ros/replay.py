@@ -21,8 +21,8 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.utilities import remove_ros_args
 
-from helireach_ros.mcap_log import McapLogError, read_log, read_log_topics
-from helireach_ros.nodes.recorder import import_message_type, qos_profile
+from helireach_ros.core.mcap_log import McapLogError, read_log, read_log_topics
+from helireach_ros.ros.nodes.recorder import import_message_type, qos_profile
 
 __all__ = ["main", "replay_log"]
 

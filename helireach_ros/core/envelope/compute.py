@@ -1,7 +1,7 @@
 """Computing H-V envelopes: one verified landing plan per grid node, in parallel or on Dask.
 
 For every node (h, V) of a height × speed grid, the helicopter flies level at trim when the
-engine fails (:func:`~helireach_ros.model.initial_state_after_failure`); the planner decides
+engine fails (:func:`~helireach_ros.core.model.initial_state_after_failure`); the planner decides
 whether a safe landing is reachable from there. The work runs in three phases:
 
 1. **Sweep.** One task per speed column, heights ascending. The first node is solved cold; each
@@ -33,22 +33,20 @@ import dataclasses
 import datetime
 import logging
 import math
-import multiprocessing
 import os
 import platform
 import signal
-import sys
 import time
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 
 from helireach_ros import __version__
-from helireach_ros.airframe import Airframe
-from helireach_ros.envelope import (
+from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION,
     PENDING,
@@ -58,8 +56,10 @@ from helireach_ros.envelope import (
     read_envelope_file,
     save_envelope,
 )
-from helireach_ros.settings import PlannerSettings
-from helireach_ros.units import FT, KT, LBF
+from helireach_ros.core.envelope.progress import NullProgress, Progress
+from helireach_ros.core.envelope.workers import SerialExecutor
+from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.units import FT, KT
 
 __all__ = [
     "HEIGHT_TOLERANCE",
@@ -67,12 +67,7 @@ __all__ = [
     "SPEED_TOLERANCE",
     "ComputeInterrupted",
     "EnvelopeJob",
-    "Progress",
     "compute_envelope",
-    "condition_file_name",
-    "make_executor",
-    "parse_list",
-    "parse_range",
 ]
 
 log = logging.getLogger(__name__)
@@ -85,7 +80,7 @@ SPEED_TOLERANCE = 1.0 * KT
 """Boundary refinement along a speed line stops when the bracket is this narrow, m/s."""
 BOUND_MULTIPLIER_FLOOR = 1e-6
 """Stored bound multipliers smaller than this are stored as 0: IPOPT's warm start raises every bound multiplier
-to ``warm_start_mult_bound_push`` (1e-6 in :mod:`helireach_ros.transcription`) anyway, so the warm start is
+to ``warm_start_mult_bound_push`` (1e-6 in :mod:`helireach_ros.core.transcription.base`) anyway, so the warm start is
 unchanged (checked: bit-identical solutions), and the zeros compress (the shipped file shrinks by ~1/4)."""
 CHECKPOINT_INTERVAL_S = 60.0
 """A long computation saves a partial file this often (and always on Ctrl-C)."""
@@ -170,7 +165,7 @@ def _checked(warm: _Solution, cold: _Solution) -> _Solution:
 
 def _warm_start_of(solution: _Solution):
     """The planner warm start stored in a solution (float32 → float64), or None without a plan."""
-    from helireach_ros.planner import WarmStart
+    from helireach_ros.core.planner import WarmStart
 
     if solution.primal is None or solution.status == _FAILED:
         return None
@@ -183,8 +178,8 @@ def _warm_start_of(solution: _Solution):
 
 def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None) -> _Solution:
     """One ``plan`` from level trim at (height, speed) after the failure; errors become ``failed``."""
-    from helireach_ros.model import initial_state_after_failure
-    from helireach_ros.planner import get_planner
+    from helireach_ros.core.model import initial_state_after_failure
+    from helireach_ros.core.planner import get_planner
 
     try:
         state = initial_state_after_failure(job.airframe, height, speed, job.power_fraction)
@@ -320,177 +315,6 @@ def _bisect_edge(
         safe_end, confirm_each = confirmed, True
     boundary = _BoundaryPoint(edge, point(safe_end[0]), point(other_end), solves, cold_solves)
     return "boundary", edge, boundary
-
-
-def _call(item: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
-    function, arguments = item
-    return function(*arguments)
-
-
-def _ignore_interrupts() -> None:
-    """Worker initialiser: Ctrl-C reaches the whole process group; only the coordinator handles it."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-# --- executors --------------------------------------------------------------------------------------------
-
-
-class _SerialExecutor:
-    """Runs tasks in this process (one worker)."""
-
-    description = "1 worker (in process)"
-    workers = 1
-
-    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
-        for arguments in tasks:
-            yield function(*arguments)
-
-    def abort(self) -> None:
-        pass
-
-    def close(self) -> None:
-        pass
-
-
-class _ProcessExecutor:
-    """A pool of local worker processes (forkserver: workers start from a process that imported CasADi once)."""
-
-    def __init__(self, workers: int) -> None:
-        context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(["helireach_ros.envelope_compute", "helireach_ros.planner"])
-        self.workers = workers
-        self.description = f"{workers} local worker processes"
-        self._pool = context.Pool(workers, initializer=_ignore_interrupts)
-
-    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
-        yield from self._pool.imap_unordered(_call, [(function, arguments) for arguments in tasks], chunksize=1)
-
-    def abort(self) -> None:
-        self._pool.terminate()
-        self._pool.join()
-
-    def close(self) -> None:
-        self._pool.close()
-        self._pool.join()
-
-
-class _DaskExecutor:
-    """Tasks on a Dask distributed cluster (workers need helireach_ros installed)."""
-
-    def __init__(self, address: str, timeout_s: float = 30.0) -> None:
-        from distributed import Client
-
-        self._client = Client(address, timeout=timeout_s, set_as_default=False)
-        self.workers = max(1, sum(self._client.nthreads().values()))
-        self.description = f"Dask scheduler {address} ({self.workers} worker threads)"
-        self._futures: list[Any] = []
-
-    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
-        from distributed import as_completed
-
-        self._futures = [self._client.submit(function, *arguments, pure=False) for arguments in tasks]
-        for future in as_completed(self._futures, loop=self._client.loop):
-            yield future.result()
-        self._futures = []
-
-    def abort(self) -> None:
-        if self._futures:
-            self._client.cancel(self._futures)
-        self._futures = []
-
-    def close(self) -> None:
-        self._client.close()
-
-
-def make_executor(workers: int | None = None, scheduler: str | None = None):
-    """The executor for ``--workers N`` (default: every core) or ``--scheduler ADDRESS`` (Dask).
-
-    Returns:
-        An object with ``map_unordered(function, tasks)``, ``abort()``, ``close()``, ``description``.
-    """
-    if scheduler:
-        return _DaskExecutor(scheduler)
-    count = workers if workers is not None else (os.cpu_count() or 1)
-    if count < 1:
-        raise ValueError(f"workers must be >= 1, got {count}")
-    return _SerialExecutor() if count == 1 else _ProcessExecutor(count)
-
-
-# --- progress ---------------------------------------------------------------------------------------------
-
-
-class Progress:
-    """Cells done, rate and ETA: a redrawn bar on an interactive terminal, else a log line every ~10 %/10 s."""
-
-    def __init__(self, stream: IO[str] | None = None, interactive: bool | None = None, label: str = "") -> None:
-        self.stream = stream if stream is not None else sys.stderr
-        self.interactive = self.stream.isatty() if interactive is None else interactive
-        self.label = label
-        self._phase, self._total, self._done, self._started, self._shown = "", 0, 0, 0.0, 0.0
-        self._last_fraction = -1.0
-
-    def start(self, phase: str, total: int) -> None:
-        self._phase, self._total, self._done = phase, total, 0
-        self._started = self._shown = time.monotonic()
-        self._last_fraction = -1.0
-        if total:
-            self._show(force=True)
-
-    def advance(self, count: int = 1) -> None:
-        self._done += count
-        self._show(force=self._done >= self._total)
-
-    def finish(self) -> None:
-        if self.interactive and self._total:
-            self.stream.write("\n")
-            self.stream.flush()
-
-    def message(self, text: str) -> None:
-        if self.interactive:
-            self.stream.write("\r\033[K")
-        self.stream.write(text + "\n")
-        self.stream.flush()
-
-    def _show(self, force: bool = False) -> None:
-        now = time.monotonic()
-        elapsed = now - self._started
-        rate = self._done / elapsed if elapsed > 0 else 0.0
-        remaining = (self._total - self._done) / rate if rate > 0 else math.nan
-        fraction = self._done / self._total if self._total else 1.0
-        eta = f"ETA {remaining:5.0f} s" if math.isfinite(remaining) else "ETA    ? s"
-        prefix = f"{self.label}{self._phase}"
-        if self.interactive:
-            if not force and now - self._shown < 0.1:
-                return
-            width = 30
-            bar = "#" * int(width * fraction) + "-" * (width - int(width * fraction))
-            self.stream.write(f"\r\033[K{prefix} [{bar}] {self._done}/{self._total} {rate:6.1f}/s {eta}")
-        else:
-            if not force and fraction - self._last_fraction < 0.1 and now - self._shown < 10.0:
-                return
-            self._last_fraction = fraction
-            self.stream.write(f"{prefix}: {self._done}/{self._total} ({100 * fraction:.0f} %), {rate:.1f}/s, {eta}\n")
-        self._shown = now
-        self.stream.flush()
-
-
-class _NullProgress(Progress):
-    """Reports nothing (library use without a progress display)."""
-
-    def __init__(self) -> None:
-        super().__init__(stream=sys.stderr, interactive=False)
-
-    def start(self, phase: str, total: int) -> None:
-        pass
-
-    def advance(self, count: int = 1) -> None:
-        pass
-
-    def finish(self) -> None:
-        pass
-
-    def message(self, text: str) -> None:
-        log.info("%s", text)
 
 
 class _InterruptGuard:
@@ -791,8 +615,8 @@ def compute_envelope(
         ComputeInterrupted: on Ctrl-C/SIGTERM, after saving a partial file to ``out_path``.
         EnvelopeError: ``resume`` with a missing or incompatible partial file.
     """
-    executor = executor or _SerialExecutor()
-    progress = progress or _NullProgress()
+    executor = executor or SerialExecutor()
+    progress = progress or NullProgress()
     path = Path(out_path) if out_path is not None else None
     metadata = _base_metadata(job, command, grid_spec)
     state = _EnvelopeState(job)
@@ -882,43 +706,3 @@ def compute_envelope(
     if path is not None:
         save_envelope(envelope, path)
     return envelope
-
-
-# --- grids and sweeps -------------------------------------------------------------------------------------
-
-
-def parse_range(text: str, unit: float = 1.0, name: str = "range") -> tuple[float, ...]:
-    """Parses ``start:stop:count`` (inclusive, evenly spaced) into SI values (× ``unit``).
-
-    Raises:
-        ValueError: malformed text, count < 2, or stop <= start.
-    """
-    parts = text.split(":")
-    try:
-        if len(parts) != 3:
-            raise ValueError
-        start, stop, count = float(parts[0]), float(parts[1]), int(parts[2])
-    except ValueError:
-        raise ValueError(f"{name} must be start:stop:count (e.g. 0:800:41), got {text!r}") from None
-    if not (math.isfinite(start) and math.isfinite(stop)) or count < 2 or stop <= start:
-        raise ValueError(f"{name} {text!r}: need finite start < stop and count >= 2")
-    return tuple(float(v) for v in np.linspace(start, stop, count) * unit)
-
-
-def parse_list(text: str, name: str = "list") -> list[float]:
-    """Parses a comma-separated list of numbers."""
-    try:
-        values = [float(item) for item in text.split(",") if item.strip()]
-    except ValueError:
-        raise ValueError(f"{name} must be comma-separated numbers, got {text!r}") from None
-    if not values or not all(math.isfinite(v) for v in values):
-        raise ValueError(f"{name} must hold at least one finite number, got {text!r}")
-    return values
-
-
-def condition_file_name(airframe: Airframe, power_fraction: float) -> str:
-    """``<airframe>_<weight>lb_da<altitude>ft_pf<fraction>.npz``: one file per sweep combination."""
-    return (
-        f"{airframe.name}_{airframe.gross_weight / LBF:.0f}lb_da{airframe.density_altitude / FT:.0f}ft_"
-        f"pf{power_fraction:g}.npz"
-    )

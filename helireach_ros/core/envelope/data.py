@@ -4,7 +4,7 @@ An envelope holds, for one airframe, planner settings and power-loss level, the 
 every node of a (height above ground, forward speed) grid of level-trim states: status, optimal
 value, time to land, solver statistics and the plan itself (compactly, to warm-start or publish a
 fallback), plus the refined safe/unsafe boundary points. It is computed by
-:mod:`helireach_ros.envelope_compute`.
+:mod:`helireach_ros.core.envelope.compute`.
 
 File format (``.npz``, one file per envelope, self-describing):
 
@@ -17,7 +17,7 @@ File format (``.npz``, one file per envelope, self-describing):
   corrupt file fails the zip CRC or this checksum and is refused with :class:`EnvelopeError`.
 
 Per-cell plans are stored as float32: the NLP primal and both multiplier vectors (a
-:class:`~helireach_ros.planner.WarmStart`) and the control function (breakpoints and values), which
+:class:`~helireach_ros.core.planner.WarmStart`) and the control function (breakpoints and values), which
 is enough to warm-start the planner and to publish a fallback trajectory.
 
 Query semantics are conservative. A state is ``safe`` only if every grid node enclosing it is safe
@@ -44,13 +44,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from helireach_ros.resources import config_path
-from helireach_ros.units import FT, KT
+from helireach_ros.core.resources import config_path, source_root
+from helireach_ros.core.units import FT, KT
 
 if TYPE_CHECKING:
-    from helireach_ros.airframe import Airframe
-    from helireach_ros.planner import WarmStart
-    from helireach_ros.settings import PlannerSettings
+    from helireach_ros.core.airframe import Airframe
+    from helireach_ros.core.planner import WarmStart
+    from helireach_ros.core.settings import PlannerSettings
 
 __all__ = [
     "DEFAULT_ENVELOPE",
@@ -147,7 +147,7 @@ class StoredPlan:
         time_to_land: s.
         warm_start: the NLP solution, for the planner of the envelope's airframe and settings.
         control_times, control_values, control_interpolation: the control function
-            (see :class:`~helireach_ros.transcription.DecodedPlan`).
+            (see :class:`~helireach_ros.core.transcription.base.DecodedPlan`).
     """
 
     height: float
@@ -162,7 +162,7 @@ class StoredPlan:
 
     def controls_at(self, times) -> np.ndarray:
         """The planned (C_T, θ) at the given times, 2 × len(times) (held constant outside the plan)."""
-        from helireach_ros.verification import control_function
+        from helireach_ros.core.verification import control_function
 
         return control_function(self.control_times, self.control_values, self.control_interpolation, times)
 
@@ -198,7 +198,7 @@ def _array_property(name: str, doc: str) -> property:
 class Envelope:
     """An immutable H-V envelope (see the module docstring for the semantics).
 
-    Construct it with :func:`load_envelope` or :mod:`helireach_ros.envelope_compute`; the
+    Construct it with :func:`load_envelope` or :mod:`helireach_ros.core.envelope.compute`; the
     constructor validates shapes and codes but not the checksum (that is the file's business).
 
     Attributes:
@@ -352,7 +352,7 @@ class Envelope:
 
     def stored_plan(self, row: int, column: int) -> StoredPlan:
         """The plan stored at grid node (row, column), multipliers and all, as float64."""
-        from helireach_ros.planner import WarmStart
+        from helireach_ros.core.planner import WarmStart
 
         arrays = self._arrays
         return StoredPlan(
@@ -420,7 +420,7 @@ def settings_differences(stored: dict[str, Any], settings: PlannerSettings) -> l
 
 def _describe_conditions(airframe: dict[str, Any]) -> str:
     try:
-        from helireach_ros.units import LBF
+        from helireach_ros.core.units import LBF
 
         return (
             f"W = {float(airframe['gross_weight']) / LBF:.0f} lbf, "
@@ -597,4 +597,4 @@ def default_envelope_path() -> Path:
     try:
         return config_path(DEFAULT_ENVELOPE)
     except FileNotFoundError:
-        return Path(__file__).resolve().parent.parent / "config" / DEFAULT_ENVELOPE
+        return source_root() / "config" / DEFAULT_ENVELOPE

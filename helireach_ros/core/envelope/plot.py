@@ -20,8 +20,8 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, PathPatch
 from matplotlib.path import Path
 
-from helireach_ros.envelope import STATUS_CODES, Envelope
-from helireach_ros.units import FT, KT, LBF
+from helireach_ros.core.envelope.data import STATUS_CODES, Envelope
+from helireach_ros.core.units import FT, KT, LBF
 
 __all__ = ["boundary_geometry", "plot_envelope"]
 

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from helireach_ros.airframe import Airframe
-from helireach_ros.model import dynamics_function, trim_level_flight
-from helireach_ros.settings import PlannerSettings
+from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.model import dynamics_function, trim_level_flight
+from helireach_ros.core.settings import PlannerSettings
 
 __all__ = ["DecodedPlan", "Transcription", "terminal_cost"]
 

@@ -22,8 +22,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from helireach_ros.collocation import lagrange_basis_derivatives, lagrange_basis_values, lgr_points, lgr_weights
-from helireach_ros.transcription import DecodedPlan, Transcription
+from helireach_ros.core.collocation import lagrange_basis_derivatives, lagrange_basis_values, lgr_points, lgr_weights
+from helireach_ros.core.transcription.base import DecodedPlan, Transcription
 
 __all__ = ["PaperTranscription"]
 

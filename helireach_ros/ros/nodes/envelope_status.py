@@ -2,7 +2,7 @@
 
 Loads an envelope file (parameter ``envelope_file``; empty = the shipped one) and answers, for every
 canonical state (``/helireach/state``), the envelope's conservative status and margin
-(:meth:`helireach_ros.envelope.Envelope.query`). Publishes ``/helireach/safety_status``
+(:meth:`helireach_ros.core.envelope.data.Envelope.query`). Publishes ``/helireach/safety_status``
 (``diagnostic_msgs/DiagnosticStatus``, latched) when the verdict changes and every
 ``publish_period``:
 
@@ -17,7 +17,7 @@ STALE  no envelope (missing, corrupt or mismatched file), no state for ``stale_t
 ====== ==========================================================================================
 
 Heights between the monitor's ``min_height`` and 0 count as 0 (sensor noise on the ground). Setting
-``envelope_file`` at run time reloads the envelope. Run: ``python -m helireach_ros.nodes.envelope_status``.
+``envelope_file`` at run time reloads the envelope. Run: ``python -m helireach_ros.ros.nodes.envelope_status``.
 """
 
 from __future__ import annotations
@@ -33,8 +33,10 @@ from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.units import FT, KT
+from helireach_ros.core.units import FT, KT
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.executors import run_node
+from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
 
 __all__ = ["EnvelopeStatusNode", "SafetyVerdict", "evaluate_safety", "main"]
 
@@ -64,13 +66,13 @@ def evaluate_safety(
     """The safety verdict for a state (see the module docstring for the levels).
 
     Args:
-        envelope: the loaded :class:`~helireach_ros.envelope.Envelope`, or None.
+        envelope: the loaded :class:`~helireach_ros.core.envelope.data.Envelope`, or None.
         reading: the latest state, or None if none was received.
         state_age_s: time since that state was received, s.
         stale_timeout_s: older states are stale.
         warn_margin: WARN below this margin (ft/kt units).
         envelope_error: why there is no envelope.
-        limits: plausible ranges (default :class:`~helireach_ros.ros_messages.StateLimits`).
+        limits: plausible ranges (default :class:`~helireach_ros.ros.messages.StateLimits`).
     """
     envelope_id = envelope.envelope_id if envelope is not None else ""
     values: dict[str, Any] = {"envelope_id": envelope_id, "warn_margin_ft_kt": warn_margin}
@@ -108,15 +110,15 @@ class EnvelopeStatusNode(Node):
     """Publishes the safety status of the current state against an H-V envelope.
 
     Parameters: ``airframe``, ``gross_weight``, ``density_altitude`` (the aircraft today, shared with the
-    planner: :func:`~helireach_ros.ros_messages.declare_aircraft`; an envelope made for another aircraft is
+    planner: :func:`~helireach_ros.ros.messages.declare_aircraft`; an envelope made for another aircraft is
     refused), ``envelope_file`` ('' = shipped; settable at run time), ``warn_margin`` (ft/kt units;
     settable), ``stale_timeout`` (s), ``publish_period`` (s), ``diagnostics_period`` (s).
     """
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_envelope_status", **node_options)
-        declare = partial(rm.declare_checked_parameter, self)
-        load_aircraft = rm.declare_aircraft(self)
+        declare = partial(declare_checked_parameter, self)
+        load_aircraft = declare_aircraft(self)
         envelope_file = declare("envelope_file", "", "H-V envelope file ('' = the shipped one)", read_only=False)
         self._warn_margin = declare(
             "warn_margin", 20.0, "WARN below this distance to the boundary (ft/kt units)", (0.0, 1e4), read_only=False
@@ -169,7 +171,7 @@ class EnvelopeStatusNode(Node):
 
     def _load_envelope(self, path: str) -> None:
         try:
-            from helireach_ros.envelope import default_envelope_path, load_envelope
+            from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 
             if self.aircraft is None:
                 raise RuntimeError(self._aircraft_error)
@@ -251,7 +253,7 @@ class EnvelopeStatusNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the envelope status node until Ctrl-C or SIGTERM."""
-    rm.run_node(EnvelopeStatusNode, args)
+    run_node(EnvelopeStatusNode, args)
 
 
 if __name__ == "__main__":

@@ -8,7 +8,7 @@ A rising edge of the failure flag is published as a failure event (``/helireach/
 ``std_msgs/Header`` stamped with the time the edge was seen). Rejected input is counted, logged
 (throttled) and reported on ``/diagnostics``; the node never raises out of a callback.
 
-Run: ``python -m helireach_ros.nodes.monitor`` (or the ``helireach_monitor`` console script).
+Run: ``python -m helireach_ros.ros.nodes.monitor`` (or the ``helireach_monitor`` console script).
 """
 
 from __future__ import annotations
@@ -23,7 +23,9 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 
-from helireach_ros import ros_messages as rm
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.executors import run_node
+from helireach_ros.ros.parameters import declare_checked_parameter
 
 __all__ = ["VehicleMonitor", "main"]
 
@@ -41,7 +43,7 @@ class VehicleMonitor(Node):
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_monitor", **node_options)
-        declare = partial(rm.declare_checked_parameter, self)
+        declare = partial(declare_checked_parameter, self)
         self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "JointState joint whose velocity is the rotor speed")
         self._max_message_age = declare(
             "max_message_age",
@@ -208,7 +210,7 @@ class VehicleMonitor(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the monitor until Ctrl-C or SIGTERM."""
-    rm.run_node(VehicleMonitor, args)
+    run_node(VehicleMonitor, args)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Planner node: on an engine failure, plan the landing, publish it, and keep re-planning down to the ground.
 
-Startup builds the NLP once (:func:`~helireach_ros.planner.get_planner`) and solves one warm-up landing
+Startup builds the NLP once (:func:`~helireach_ros.core.planner.get_planner`) and solves one warm-up landing
 so the first real solve pays no first-call costs. It loads the envelope (for warm starts and fallbacks)
 when it was computed for the same airframe, planner settings and total power loss.
 
@@ -24,7 +24,7 @@ solve is still running); callbacks only hand work to it. So whatever executor sp
 single-threaded one, state reception, the deadline's fallback and status publishing go on during a
 solve (CasADi releases the GIL while IPOPT and CVODES run).
 
-Run: ``python -m helireach_ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
+Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """
 
 from __future__ import annotations
@@ -35,7 +35,6 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
@@ -48,65 +47,20 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.model import clip_rotor_speed_noise
-from helireach_ros.units import FT, KT
+from helireach_ros.core.failure_episode import FailureEpisode, PublishedPlan
+from helireach_ros.core.fallback import FallbackPlan, fallback_plan
+from helireach_ros.core.model import clip_rotor_speed_noise
+from helireach_ros.core.plan_verdict import plan_verdict
+from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
+from helireach_ros.core.units import FT, KT
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.executors import run_node
+from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
 
-__all__ = ["FallbackPlan", "LandingPlannerNode", "PublishedPlan", "main"]
+__all__ = ["LandingPlannerNode", "main"]
 
 _PLAN_HISTORY = 200  # published plans kept for inspection (demo, tests)
 _ROTOR_NOISE_TOLERANCE = 0.01  # fraction of Ω₀ a measured rotor speed may lie outside its limits as noise
-
-
-@dataclass(frozen=True)
-class FallbackPlan:
-    """Controls to fly when no converged plan is available in time (never called safe).
-
-    Attributes:
-        kind: ``"envelope_plan"`` or ``"autorotation_entry"``.
-        description: for people.
-        time_to_land: s (the stored plan's, or the estimated descent time).
-        control_times, control_values, control_interpolation: the control function.
-        source_status: the status of the envelope cell it comes from (``"none"`` for the entry).
-    """
-
-    kind: str
-    description: str
-    time_to_land: float
-    control_times: np.ndarray
-    control_values: np.ndarray
-    control_interpolation: str
-    source_status: str = "none"
-
-
-@dataclass
-class PublishedPlan:
-    """A plan as published: the core plan (or fallback), its stamp and bookkeeping."""
-
-    failure_id: int
-    replan_index: int
-    stamp_ns: int
-    plan: Any
-    fallback: bool
-    latency_ms: float
-    published_at_ns: int
-    warm_start_source: str
-
-
-@dataclass
-class _Failure:
-    """One engine failure being handled."""
-
-    failure_id: int
-    event_stamp_ns: int
-    event_received_ns: int
-    active: bool = True
-    published: bool = False
-    current: PublishedPlan | None = None
-    replans: int = 0
-    replans_failed: int = 0
-    deadline_handled: bool = False
-    history: list[PublishedPlan] = field(default_factory=list)
 
 
 class LandingPlannerNode(Node):
@@ -121,8 +75,8 @@ class LandingPlannerNode(Node):
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_planner", **node_options)
-        declare = partial(rm.declare_checked_parameter, self)
-        load_aircraft = rm.declare_aircraft(self)
+        declare = partial(declare_checked_parameter, self)
+        load_aircraft = declare_aircraft(self)
         settings_file = declare("planner_settings", "", "planner settings file ('' = config/planner.yaml)")
         envelope_file = declare("envelope_file", "", "envelope for warm starts/fallbacks ('' = shipped, 'none' = off)")
         self._deadline = declare("deadline", 0.25, "fallback if no plan this long after the failure, s", (0.001, 60.0))
@@ -144,7 +98,7 @@ class LandingPlannerNode(Node):
         self._publish_lock = threading.Lock()  # one plan decision/publication at a time
         self._odometry: tuple[rm.OdometryReading, int, str] | None = None
         self._rotor: tuple[rm.RotorReading, int] | None = None
-        self._failure: _Failure | None = None
+        self._failure: FailureEpisode | None = None
         self._failure_count = 0
         self.published_plans: list[PublishedPlan] = []
 
@@ -198,9 +152,9 @@ class LandingPlannerNode(Node):
         self, load_aircraft: Callable[[], Any], settings_file: str, envelope_file: str, warm_up: bool
     ) -> None:
         """Loads airframe, settings and envelope, builds the NLP (once) and warms it up."""
-        from helireach_ros.model import initial_state_after_failure
-        from helireach_ros.planner import get_planner
-        from helireach_ros.settings import load_settings
+        from helireach_ros.core.model import initial_state_after_failure
+        from helireach_ros.core.planner import get_planner
+        from helireach_ros.core.settings import load_settings
 
         started = time.perf_counter()
         # Today's weight and density altitude change the model, hence the NLP and which envelope matches
@@ -226,7 +180,7 @@ class LandingPlannerNode(Node):
         if path.strip().lower() == "none":
             return None, "no envelope (disabled): cold starts, autorotation-entry fallback"
         try:
-            from helireach_ros.envelope import default_envelope_path, load_envelope
+            from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 
             resolved = path or str(default_envelope_path())
             envelope = load_envelope(resolved, self.airframe, self.settings, 0.0)
@@ -285,7 +239,7 @@ class LandingPlannerNode(Node):
         now_ns = self._now_ns()
         with self._lock:
             self._failure_count += 1
-            failure = _Failure(self._failure_count, rm.stamp_nanoseconds(message.stamp), now_ns)
+            failure = FailureEpisode(self._failure_count, rm.stamp_nanoseconds(message.stamp), now_ns)
             self._failure = failure
         self.get_logger().warning(f"engine failure #{failure.failure_id}: planning the landing")
         if self.planner is None:
@@ -323,7 +277,7 @@ class LandingPlannerNode(Node):
         self._solver_thread.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 
-    def _plan_initial(self, failure: _Failure, retry: bool = False) -> None:
+    def _plan_initial(self, failure: FailureEpisode, retry: bool = False) -> None:
         """The first plan of a failure, warm-started from the envelope's nearest stored plan.
 
         ``retry``: called again because no converged plan is out yet; a fallback already out is not repeated.
@@ -375,7 +329,7 @@ class LandingPlannerNode(Node):
             return
         self._submit(self._replan, failure)
 
-    def _replan(self, failure: _Failure) -> None:
+    def _replan(self, failure: FailureEpisode) -> None:
         """One closed-loop re-plan from the current state, warm-started from the current plan."""
         if not failure.active or failure is not self._failure:
             return
@@ -386,8 +340,8 @@ class LandingPlannerNode(Node):
         if rotor_source != "measured":
             return  # re-planning with an assumed rotor speed could be worse than the current plan
         previous = failure.current
-        remaining = previous.plan.time_to_land - (stamp_ns - previous.stamp_ns) * 1e-9
-        if state[3] < self._replan_min_height or remaining < self._replan_min_remaining:
+        remaining = plan_time_remaining(previous.plan.time_to_land, (stamp_ns - previous.stamp_ns) * 1e-9)
+        if replanning_ends(state[3], remaining, self._replan_min_height, self._replan_min_remaining):
             failure.active = False
             self.get_logger().info(
                 f"failure #{failure.failure_id}: closed loop ends at {state[3]:.2f} m, {remaining:.2f} s to go "
@@ -405,34 +359,10 @@ class LandingPlannerNode(Node):
 
     # -- fallbacks -----------------------------------------------------------------------------------------------
     def fallback_plan(self, state: np.ndarray) -> FallbackPlan:
-        """The best available controls without a converged solve (see the module docstring)."""
-        from helireach_ros.model import steady_autorotation
+        """The best available controls without a converged solve (:func:`helireach_ros.core.fallback.fallback_plan`)."""
+        return fallback_plan(state, self.airframe, self.settings, self.envelope)
 
-        stored = self.envelope.nearest_plan(state[3], state[1]) if self.envelope is not None else None
-        if stored is not None:
-            return FallbackPlan(
-                "envelope_plan",
-                f"envelope plan of {stored.height / FT:.0f} ft, {stored.speed / KT:.0f} kt ({stored.status})",
-                stored.time_to_land,
-                stored.control_times,
-                stored.control_values,
-                stored.control_interpolation,
-                stored.status,
-            )
-        speed = float(np.clip(state[1], 0.0, 60.0))
-        descent_rate, thrust_coefficient, pitch = steady_autorotation(self.airframe, speed)
-        duration = float(np.clip(state[3] / max(descent_rate, 1.0), 1.0, self.settings.max_time_to_land))
-        return FallbackPlan(
-            "autorotation_entry",
-            f"steady autorotation entry at {speed / KT:.0f} kt (C_T {thrust_coefficient:.4f}, pitch "
-            f"{math.degrees(pitch):.1f} deg)",
-            duration,
-            np.array([0.0, duration]),
-            np.array([[thrust_coefficient], [pitch]]),
-            "zero_order_hold",
-        )
-
-    def _publish_fallback(self, failure: _Failure, state: np.ndarray, stamp_ns: int, reason: str) -> None:
+    def _publish_fallback(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, reason: str) -> None:
         try:
             fallback = self.fallback_plan(state)
         except Exception as error:  # the last resort must not take the node down
@@ -478,7 +408,7 @@ class LandingPlannerNode(Node):
         self.get_logger().warning(f"failure #{failure.failure_id}: published fallback {fallback.description}")
 
     # -- publishing ----------------------------------------------------------------------------------------------
-    def _common_values(self, failure: _Failure, state: np.ndarray, stamp_ns: int) -> dict[str, Any]:
+    def _common_values(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int) -> dict[str, Any]:
         return {
             "failure_id": failure.failure_id,
             "failure_stamp_ns": failure.event_stamp_ns,
@@ -497,7 +427,7 @@ class LandingPlannerNode(Node):
 
     def _publish_plan(
         self,
-        failure: _Failure,
+        failure: FailureEpisode,
         plan: Any,
         stamp_ns: int,
         frame: str,
@@ -535,7 +465,8 @@ class LandingPlannerNode(Node):
                 "rotor_speed_source": rotor_source,
                 **self._common_values(failure, plan.initial_state, stamp_ns),
             }
-            level, text = self._plan_verdict(plan, rotor_source)
+            level_name, text = plan_verdict(plan, rotor_source)
+            level = rm.DIAGNOSTIC_LEVELS[level_name]
             self._status_publisher.publish(
                 rm.diagnostic_status(level, f"{self.get_name()}: landing plan", text, self.airframe.name, values)
             )
@@ -543,22 +474,7 @@ class LandingPlannerNode(Node):
         if not replan:
             self.get_logger().info(f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
 
-    @staticmethod
-    def _plan_verdict(plan: Any, rotor_source: str) -> tuple[bytes, str]:
-        touchdown = plan.replay.touchdown_state
-        summary = (
-            f"land in {plan.time_to_land:.1f} s at {touchdown[0] / FT:.1f} ft/s, {touchdown[1] / KT:.1f} kt "
-            f"(value {plan.value:+.2f})"
-        )
-        if plan.safe and rotor_source == "measured":
-            return DiagnosticStatus.OK, f"SAFE: {summary}"
-        if plan.safe:
-            return DiagnosticStatus.WARN, f"SAFE if the rotor speed is nominal (not measured): {summary}"
-        if plan.status == "unverified":
-            return DiagnosticStatus.WARN, f"NOT VERIFIED: the replay does not land within limits; {summary}"
-        return DiagnosticStatus.ERROR, f"UNSAFE: no safe landing, best effort; {summary}"
-
-    def _publish_status_only(self, failure: _Failure, text: str) -> None:
+    def _publish_status_only(self, failure: FailureEpisode, text: str) -> None:
         self.get_logger().error(f"failure #{failure.failure_id}: {text}")
         hardware_id = self.airframe.name if self.planner is not None else "helireach"
         values = {
@@ -581,10 +497,8 @@ class LandingPlannerNode(Node):
                     )
                 )
 
-    def _remember(self, failure: _Failure, record: PublishedPlan) -> None:
-        failure.published = True
-        failure.current = record
-        failure.history.append(record)
+    def _remember(self, failure: FailureEpisode, record: PublishedPlan) -> None:
+        failure.remember(record)
         self.published_plans.append(record)
         del self.published_plans[:-_PLAN_HISTORY]
 
@@ -628,7 +542,7 @@ class LandingPlannerNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the planner node until Ctrl-C or SIGTERM."""
-    rm.run_node(LandingPlannerNode, args)
+    run_node(LandingPlannerNode, args)
 
 
 if __name__ == "__main__":

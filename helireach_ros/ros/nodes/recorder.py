@@ -7,7 +7,7 @@ connects to best-effort and volatile publishers and still receives the current v
 topics such as ``/helireach/safety_status`` even when it starts after their publisher. The QoS the
 publisher offers is stored with the topic, so a replay keeps latched topics latched.
 
-Run: ``python -m helireach_ros.nodes.recorder --ros-args -p log_dir:=/tmp/logs``. SIGINT/SIGTERM end
+Run: ``python -m helireach_ros.ros.nodes.recorder --ros-args -p log_dir:=/tmp/logs``. SIGINT/SIGTERM end
 spinning and the file is finished (summary and index written).
 """
 
@@ -28,8 +28,9 @@ from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.topic_endpoint_info import TopicEndpointInfo
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.mcap_log import McapLogError, McapLogWriter, QosDescription
+from helireach_ros.core.mcap_log import McapLogError, McapLogWriter, QosDescription
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.executors import run_node
 
 __all__ = [
     "DEFAULT_TOPICS",
@@ -41,7 +42,7 @@ __all__ = [
 ]
 
 #: ``topic:pkg/msg/Type`` entries recorded when the ``topics`` parameter is not set: every topic of the
-#: contract table (:data:`helireach_ros.ros_messages.TOPICS`, documented in msg_docs/).
+#: contract table (:data:`helireach_ros.ros.messages.TOPICS`, documented in msg_docs/).
 DEFAULT_TOPICS: tuple[str, ...] = tuple(f"{spec.name}:{spec.type_name}" for spec in rm.TOPICS.values())
 
 _DEFAULT_QOS = QosDescription("reliable", "volatile", 10)
@@ -244,7 +245,7 @@ class McapRecorder(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Run the recorder until SIGINT/SIGTERM, then finish the log (destroying the node closes it)."""
-    rm.run_node(McapRecorder, args)
+    run_node(McapRecorder, args)
 
 
 if __name__ == "__main__":

@@ -1,8 +1,8 @@
 """Simulated vehicle node: the helicopter the helireach nodes fly in tests, the demo and at a desk.
 
-Flies a scenario (:func:`~helireach_ros.simulation.load_scenario`: level trim at a height and speed,
+Flies a scenario (:func:`~helireach_ros.core.simulation.load_scenario`: level trim at a height and speed,
 engine failure at a time, parameter mismatch, seeded sensor noise) with
-:class:`~helireach_ros.simulation.SimulatedVehicle` in real time, and publishes what a real
+:class:`~helireach_ros.core.simulation.SimulatedVehicle` in real time, and publishes what a real
 vehicle would: ``/vehicle/odometry``, ``/vehicle/rotor`` and ``/vehicle/engine_failure`` every
 ``publish_period``. After the failure it follows the latest ``/helireach/landing_trajectory``
 (holding the trim controls until the first arrives; the trajectory's header stamp is its time 0).
@@ -10,7 +10,7 @@ At touchdown it publishes ``/helireach/touchdown`` (``diagnostic_msgs/Diagnostic
 OK when the landing met the limits, ERROR otherwise, with descent rate, forward speed and rotor
 speed. Time 0 of the scenario is the first timer tick.
 
-Run: ``python -m helireach_ros.nodes.sim_vehicle --ros-args -p scenario:=demo_500ft_75kt``.
+Run: ``python -m helireach_ros.ros.nodes.sim_vehicle --ros-args -p scenario:=demo_500ft_75kt``.
 """
 
 from __future__ import annotations
@@ -27,9 +27,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros import ros_messages as rm
-from helireach_ros.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
-from helireach_ros.units import FT, KT
+from helireach_ros.core.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
+from helireach_ros.core.units import FT, KT
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.executors import run_node
+from helireach_ros.ros.parameters import declare_checked_parameter
 
 __all__ = ["SimVehicleNode", "main", "touchdown_status"]
 
@@ -82,7 +84,7 @@ class SimVehicleNode(Node):
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_sim_vehicle", **node_options)
-        declare = partial(rm.declare_checked_parameter, self)
+        declare = partial(declare_checked_parameter, self)
         scenario_name = declare("scenario", "demo_500ft_75kt", "scenario name (config/scenarios) or file")
         publish_period = declare("publish_period", 0.04, "sensor publishing (and integration) period, s", (1e-3, 1.0))
         self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "odometry frame")
@@ -211,7 +213,7 @@ class SimVehicleNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the simulated vehicle until Ctrl-C or SIGTERM."""
-    rm.run_node(SimVehicleNode, args)
+    run_node(SimVehicleNode, args)
 
 
 if __name__ == "__main__":

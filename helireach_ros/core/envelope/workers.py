@@ -1,0 +1,110 @@
+"""Where envelope tasks run: in this process, on a pool of local processes, or on a Dask cluster.
+
+Each executor has ``map_unordered(function, tasks)`` (results as they finish), ``abort()``, ``close()``,
+``workers`` and ``description``; the computation (:mod:`.compute`) does not care which it gets, and the
+result is identical for all of them.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+__all__ = ["SerialExecutor", "make_executor"]
+
+
+def _call(item: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
+    function, arguments = item
+    return function(*arguments)
+
+
+def _ignore_interrupts() -> None:
+    """Worker initialiser: Ctrl-C reaches the whole process group; only the coordinator handles it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+# --- executors --------------------------------------------------------------------------------------------
+
+
+class SerialExecutor:
+    """Runs tasks in this process (one worker)."""
+
+    description = "1 worker (in process)"
+    workers = 1
+
+    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        for arguments in tasks:
+            yield function(*arguments)
+
+    def abort(self) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+class _ProcessExecutor:
+    """A pool of local worker processes (forkserver: workers start from a process that imported CasADi once)."""
+
+    def __init__(self, workers: int) -> None:
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(["helireach_ros.core.envelope.compute", "helireach_ros.core.planner"])
+        self.workers = workers
+        self.description = f"{workers} local worker processes"
+        self._pool = context.Pool(workers, initializer=_ignore_interrupts)
+
+    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        yield from self._pool.imap_unordered(_call, [(function, arguments) for arguments in tasks], chunksize=1)
+
+    def abort(self) -> None:
+        self._pool.terminate()
+        self._pool.join()
+
+    def close(self) -> None:
+        self._pool.close()
+        self._pool.join()
+
+
+class _DaskExecutor:
+    """Tasks on a Dask distributed cluster (workers need helireach_ros installed)."""
+
+    def __init__(self, address: str, timeout_s: float = 30.0) -> None:
+        from distributed import Client
+
+        self._client = Client(address, timeout=timeout_s, set_as_default=False)
+        self.workers = max(1, sum(self._client.nthreads().values()))
+        self.description = f"Dask scheduler {address} ({self.workers} worker threads)"
+        self._futures: list[Any] = []
+
+    def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
+        from distributed import as_completed
+
+        self._futures = [self._client.submit(function, *arguments, pure=False) for arguments in tasks]
+        for future in as_completed(self._futures, loop=self._client.loop):
+            yield future.result()
+        self._futures = []
+
+    def abort(self) -> None:
+        if self._futures:
+            self._client.cancel(self._futures)
+        self._futures = []
+
+    def close(self) -> None:
+        self._client.close()
+
+
+def make_executor(workers: int | None = None, scheduler: str | None = None):
+    """The executor for ``--workers N`` (default: every core) or ``--scheduler ADDRESS`` (Dask).
+
+    Returns:
+        An object with ``map_unordered(function, tasks)``, ``abort()``, ``close()``, ``description``.
+    """
+    if scheduler:
+        return _DaskExecutor(scheduler)
+    count = workers if workers is not None else (os.cpu_count() or 1)
+    if count < 1:
+        raise ValueError(f"workers must be >= 1, got {count}")
+    return SerialExecutor() if count == 1 else _ProcessExecutor(count)

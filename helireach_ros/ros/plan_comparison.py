@@ -1,0 +1,166 @@
+"""Re-running the planner on the failures of a recorded log, and comparing with what was published.
+
+``helireach replay LOG.mcap --compare`` (:mod:`helireach_ros.cli.replay`) prints the comparison; the
+system tests use it to check that a run's first plans are reproducible from its log.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["PlanComparison", "compare_logged_plans"]
+
+_STATE_KEYS = (
+    "initial_descent_rate_m_s",
+    "initial_forward_speed_m_s",
+    "initial_rotor_speed_rad_s",
+    "initial_height_m",
+    "initial_distance_m",
+    "initial_engine_power_w",
+)
+
+
+@dataclass(frozen=True)
+class PlanComparison:
+    """A logged plan against the planner re-run on its initial state.
+
+    Attributes:
+        failure_id: which failure of the log.
+        logged_status, rerun_status: the plans' statuses.
+        logged_time_to_land, rerun_time_to_land: s.
+        logged_value, rerun_value: the NLP values.
+        max_thrust_difference: largest |ΔC_T| over the plan (both trajectories as published).
+        max_pitch_difference: largest |Δθ|, rad.
+        reproduced: same status and differences within the tolerances.
+    """
+
+    failure_id: int
+    logged_status: str
+    rerun_status: str
+    logged_time_to_land: float
+    rerun_time_to_land: float
+    logged_value: float
+    rerun_value: float
+    max_thrust_difference: float
+    max_pitch_difference: float
+    reproduced: bool
+
+
+def _logged_plans(path: Path) -> tuple[list[tuple[dict[str, str], Any]], dict[str, Any]]:
+    """(status values, trajectory message) of each failure's first converged plan in a log, and its metadata."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.serialization import deserialize_message
+    from trajectory_msgs.msg import JointTrajectory
+
+    from helireach_ros.core.mcap_log import read_log, read_log_metadata
+    from helireach_ros.ros import messages as rm
+
+    statuses, trajectories = [], {}
+    for message in read_log(path):
+        if message.topic == rm.TOPIC_PLAN_STATUS:
+            values = rm.status_values(deserialize_message(message.cdr, DiagnosticStatus))
+            converged = values.get("status") in ("safe", "unsafe", "unverified") and values.get("fallback") == "false"
+            if converged and values.get("replan_index") == "0":
+                statuses.append(values)
+        elif message.topic == rm.TOPIC_LANDING_TRAJECTORY:
+            trajectory = deserialize_message(message.cdr, JointTrajectory)
+            trajectories[rm.stamp_nanoseconds(trajectory.header.stamp)] = trajectory
+    pairs = [(values, trajectories.get(int(values["state_stamp_ns"]))) for values in statuses]
+    return pairs, read_log_metadata(path)
+
+
+def _controls_on_grid(times: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.ndarray:
+    return np.vstack([np.interp(grid, times, row) for row in values])
+
+
+def compare_logged_plans(
+    path: str | Path,
+    thrust_tolerance: float = 2e-4,
+    pitch_tolerance: float = math.radians(0.5),
+    time_tolerance: float = 0.05,
+) -> list[PlanComparison]:
+    """Re-runs the planner on each logged failure state and compares with the logged plan.
+
+    Only each failure's first plan is compared: closed-loop re-plans were warm-started from the
+    previous plan, which the log does not hold, and the landing NLP can have several equally good
+    optima. The re-run uses the airframe and planner settings recorded in the log's metadata and, like the
+    planner node, a warm start from the shipped envelope's nearest stored plan when it matches.
+
+    Args:
+        path: the ``.mcap`` log.
+        thrust_tolerance: largest accepted |ΔC_T|.
+        pitch_tolerance: largest accepted |Δθ|, rad.
+        time_tolerance: largest accepted difference in time to land, s.
+
+    Raises:
+        McapLogError: unreadable log. ValueError: the log holds no plan or lacks its metadata.
+    """
+    from helireach_ros.core.airframe import load_airframe
+    from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+    from helireach_ros.core.planner import get_planner
+    from helireach_ros.core.settings import PlannerSettings
+    from helireach_ros.core.simulation import piecewise_linear_controls
+    from helireach_ros.ros import messages as rm
+
+    pairs, metadata = _logged_plans(Path(path))
+    if not pairs:
+        raise ValueError(f"{path}: no converged landing plan in the log")
+    recorded = metadata.get("helireach", {})
+    if "planner_settings" not in recorded or "airframe" not in recorded:
+        raise ValueError(f"{path}: the log's metadata names no airframe/planner settings (not a bringup log?)")
+    airframe = load_airframe(recorded["airframe"])
+    if recorded.get("gross_weight_n") and recorded.get("density_altitude_m"):  # the planner node's conditions
+        airframe = airframe.with_conditions(float(recorded["gross_weight_n"]), float(recorded["density_altitude_m"]))
+    if recorded.get("airframe_digest") and recorded["airframe_digest"] != airframe.digest():
+        raise ValueError(f"{path}: airframe {airframe.name!r} differs from the logged one (digest)")
+    settings = PlannerSettings(**json.loads(recorded["planner_settings"]))
+    planner = get_planner(airframe, settings)
+    try:
+        envelope = load_envelope(default_envelope_path(), airframe, settings, 0.0)
+    except Exception:
+        envelope = None
+    comparisons = []
+    for values, trajectory in pairs:
+        state = np.array([float(values[key]) for key in _STATE_KEYS])
+        stored = envelope.nearest_plan(state[3], state[1]) if envelope is not None else None
+        plan = planner.plan(state, stored.warm_start if stored is not None else None)
+        rerun_times, rerun_values = piecewise_linear_controls(
+            plan.control_times, plan.control_values, plan.control_interpolation
+        )
+        if trajectory is not None:
+            _, logged_times, logged_values = rm.read_trajectory(trajectory)
+            grid = np.union1d(logged_times, rerun_times)
+            difference = np.abs(
+                _controls_on_grid(logged_times, logged_values, grid)
+                - _controls_on_grid(rerun_times, rerun_values, grid)
+            ).max(axis=1)
+        else:
+            difference = np.array([math.inf, math.inf])
+        logged_time = float(values["time_to_land_s"])
+        reproduced = bool(
+            values["status"] == plan.status
+            and difference[0] <= thrust_tolerance
+            and difference[1] <= pitch_tolerance
+            and abs(logged_time - plan.time_to_land) <= time_tolerance
+        )
+        comparisons.append(
+            PlanComparison(
+                failure_id=int(values["failure_id"]),
+                logged_status=values["status"],
+                rerun_status=plan.status,
+                logged_time_to_land=logged_time,
+                rerun_time_to_land=plan.time_to_land,
+                logged_value=float(values["value"]),
+                rerun_value=plan.value,
+                max_thrust_difference=float(difference[0]),
+                max_pitch_difference=float(difference[1]),
+                reproduced=reproduced,
+            )
+        )
+    return comparisons
