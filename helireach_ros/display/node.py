@@ -125,7 +125,7 @@ class CockpitDisplay(Node):
         super().__init__("helireach_display", **node_options)
         self._lock = threading.Lock()
         self._latest = _Latest()
-        # a bad override is logged and the default used (ros_messages.declare_checked_parameter)
+        # a bad override is logged and the default used (ros.parameters.declare_checked_parameter)
         declare = partial(declare_checked_parameter, self)
         self._port = declare("port", DEFAULT_PORT, "TCP port of the page (0 = any free port)", (0, 65535))
         self._bind = declare("bind", DEFAULT_BIND, "listen address; loopback unless set explicitly")
@@ -149,7 +149,7 @@ class CockpitDisplay(Node):
         self._envelope_json = to_json(envelope_data)
         self._plan_json = "null"
 
-        # QoS as documented in msg_docs (ros_messages): the safety status and the plan are latched, so a page opened
+        # QoS as documented in msg_docs (ros/messages.py): the safety status and the plan are latched, so a page opened
         # after the failure shows the plan; sensor streams with BEST_EFFORT, which matches any publisher
         for message_type, topic, callback, qos in (
             (DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, self._on_safety_status, rm.LATCHED_QOS),

@@ -239,7 +239,7 @@ def rotor_limits_section(airframe: Any = None, metadata: Mapping[str, Any] | Non
 
 
 def trajectory_section(message: JointTrajectory) -> dict[str, Any]:
-    """Collective and pitch against time from a landing trajectory (:func:`ros_messages.read_trajectory`).
+    """Collective and pitch against time from a landing trajectory (:func:`helireach_ros.ros.messages.read_trajectory`).
 
     Returns:
         ``{"t_s", "collective", "pitch_rad", "stamp_s"}`` (lists), or ``{"error": text}`` for an unreadable one.

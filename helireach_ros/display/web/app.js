@@ -1,4 +1,4 @@
-// helireach cockpit display: receives JSON frames (SI units) over a WebSocket from helireach_ros.nodes.display
+// helireach cockpit display: receives JSON frames (SI units) over a WebSocket from helireach_ros.display.node
 // and draws them. Read-only: the page never sends anything. The banner follows /helireach/safety_status only;
 // the server decides staleness, and the page also shows NO DATA when its own link goes quiet or drops.
 "use strict";
