@@ -8,6 +8,7 @@ from helireach_ros.core.model import (
     dynamics_function,
     initial_state_after_failure,
     steady_autorotation,
+    trim_flight,
     trim_level_flight,
 )
 from helireach_ros.core.units import FT, KT
@@ -84,3 +85,39 @@ def test_initial_state_after_failure_keeps_a_fraction_of_trim_power(uh60):
         initial_state_after_failure(uh60, 200 * FT, 50 * KT, power_fraction=1.5)
     with pytest.raises(ValueError):
         initial_state_after_failure(uh60, float("nan"), 50 * KT)
+
+
+FPM = FT / 60.0
+
+
+@pytest.mark.parametrize(("speed_kt", "climb_fpm"), [(0, -2000), (40, -2000), (75, -3000), (75, 1500), (120, -1000)])
+def test_trim_on_a_flight_path_is_an_equilibrium(uh60, speed_kt, climb_fpm):
+    trim = trim_flight(uh60, speed_kt * KT, climb_fpm * FPM)
+    state = initial_state_after_failure(
+        uh60, 300 * FT, speed_kt * KT, power_fraction=1.0, climb_rate=climb_fpm * FPM
+    ).as_array()
+    assert state[0] == pytest.approx(-climb_fpm * FPM)  # y is the descent rate
+    derivative = np.asarray(dynamics_function(uh60)(state, [trim.thrust_coefficient, trim.pitch_angle])).ravel()
+    np.testing.assert_allclose(derivative[:3], [0.0, 0.0, 0.0], atol=1e-9)
+    assert derivative[3] == pytest.approx(climb_fpm * FPM)
+
+
+def test_power_to_hold_the_rotor_falls_in_a_descent_and_rises_in_a_climb(uh60):
+    powers = [trim_flight(uh60, 75 * KT, climb * FPM).power for climb in (-3000, -1000, 0, 1500)]
+    assert np.all(np.diff(powers) > 0.0)
+    assert trim_flight(uh60, 75 * KT, 0.0) == trim_level_flight(uh60, 75 * KT)
+
+
+def test_a_descent_too_steep_for_powered_flight_is_refused(uh60):
+    with pytest.raises(ValueError, match=r"autorotates|terminal"):
+        trim_flight(uh60, 75 * KT, -8000 * FPM)
+    with pytest.raises(ValueError, match="climb rate"):
+        trim_flight(uh60, 75 * KT, float("nan"))
+
+
+def test_the_failure_state_takes_the_measured_rotor_speed(uh60):
+    state = initial_state_after_failure(uh60, 200 * FT, 50 * KT, rotor_speed=0.95 * uh60.nominal_rotor_speed)
+    assert state.rotor_speed == pytest.approx(0.95 * uh60.nominal_rotor_speed)
+    with pytest.raises(ValueError, match="rotor speed"):
+        initial_state_after_failure(uh60, 200 * FT, 50 * KT, rotor_speed=-1.0)
+

@@ -45,6 +45,7 @@ __all__ = [
     "smooth_positive",
     "state_from_sensors",
     "steady_autorotation",
+    "trim_flight",
     "trim_level_flight",
 ]
 
@@ -147,66 +148,101 @@ def dynamics_function(airframe: Airframe) -> ca.Function:
 
 @dataclass(frozen=True)
 class TrimCondition:
-    """Level, unaccelerated flight at constant rotor speed.
+    """Steady, unaccelerated flight on a straight path at constant rotor speed (Ω = Ω₀).
 
     Attributes:
         forward_speed: m/s.
         thrust_coefficient: C_T.
         pitch_angle: θ, rad (positive nose down).
         power: engine power that holds Ω = Ω₀, W.
+        climb_rate: m/s, positive up (0 = level flight; the model's descent rate y is −climb_rate).
     """
 
     forward_speed: float
     thrust_coefficient: float
     pitch_angle: float
     power: float
+    climb_rate: float = 0.0
 
 
-def trim_level_flight(airframe: Airframe, forward_speed: float) -> TrimCondition:
-    """Trims level flight (y = 0, ẏ = v̇ = Ω̇ = 0, Ω = Ω₀) at a forward speed.
+def trim_flight(airframe: Airframe, forward_speed: float, climb_rate: float = 0.0) -> TrimCondition:
+    """Trims steady flight (ẏ = v̇ = Ω̇ = 0, Ω = Ω₀) at a forward speed and climb rate.
 
-    Thrust balances weight and the fuselage drag exactly as the model computes them, so the
-    returned condition is an equilibrium of :func:`dynamics_function` (P held by the engine).
+    With y = −climb_rate and D = ½ρ V_f the drag per unit speed and area (V_f = √(y² + v²), guarded as
+    in the model), the thrust T and pitch θ balance weight and drag exactly as :func:`dynamics_function`
+    computes them:
+
+    .. math:: T\\cos\theta = W - D f_{eh}\\,y, \\qquad T\\sin\theta = D f_{ez}\\,v,
+
+    and the engine supplies the rotor power that holds Ω₀ (:func:`dynamics_function`'s Ω̇ = 0).
 
     Raises:
-        ValueError: if the speed is negative/non-finite or the trim needs C_T above the stall limit.
+        ValueError: a negative or non-finite speed, a non-finite climb rate, a trim needing C_T above the
+            stall limit, or a descent so steep that the rotor would need negative engine power to hold Ω₀
+            (it autorotates: no powered trim exists there).
     """
     if not np.isfinite(forward_speed) or forward_speed < 0.0:
         raise ValueError(f"forward speed must be finite and >= 0 m/s, got {forward_speed!r}")
-    drag = float(0.5 * airframe.air_density * airframe.horizontal_drag_area * _fuselage_speed(0.0, forward_speed))
-    drag *= forward_speed
-    weight = airframe.gross_weight
-    pitch = float(np.arctan2(drag, weight))
+    if not np.isfinite(climb_rate):
+        raise ValueError(f"climb rate must be finite, got {climb_rate!r}")
+    descent_rate = -float(climb_rate)
+    drag_per_speed = float(0.5 * airframe.air_density * _fuselage_speed(descent_rate, forward_speed))
+    vertical = airframe.gross_weight - drag_per_speed * airframe.vertical_drag_area * descent_rate
+    horizontal = drag_per_speed * airframe.horizontal_drag_area * forward_speed
+    if vertical <= 0.0:
+        raise ValueError(f"a descent at {-climb_rate:.1f} m/s is faster than the fuselage's terminal descent")
+    pitch = float(np.arctan2(horizontal, vertical))
     tip_speed = airframe.nominal_rotor_speed * airframe.rotor_radius
-    thrust_coefficient = float(np.hypot(weight, drag) / (airframe.air_density * airframe.disk_area * tip_speed**2))
+    dynamic_pressure_area = airframe.air_density * airframe.disk_area * tip_speed**2
+    thrust_coefficient = float(np.hypot(vertical, horizontal) / dynamic_pressure_area)
     if thrust_coefficient > airframe.max_thrust_coefficient:
         raise ValueError(
-            f"level flight at {forward_speed:.1f} m/s needs C_T = {thrust_coefficient:.4f}, above the stall limit "
-            f"{airframe.max_thrust_coefficient:.4f}"
+            f"flight at {forward_speed:.1f} m/s, climb {climb_rate:.1f} m/s needs C_T = {thrust_coefficient:.4f}, "
+            f"above the stall limit {airframe.max_thrust_coefficient:.4f}"
         )
-    state = [0.0, forward_speed, airframe.nominal_rotor_speed, 0.0, 0.0, 0.0]
+    state = [descent_rate, forward_speed, airframe.nominal_rotor_speed, 0.0, 0.0, 0.0]
     _, rotor_power = _rotor_terms(airframe, state, [thrust_coefficient, pitch])
-    return TrimCondition(forward_speed, thrust_coefficient, pitch, float(rotor_power))
+    if float(rotor_power) < 0.0:
+        raise ValueError(
+            f"at {forward_speed:.1f} m/s and {-climb_rate:.1f} m/s descent the rotor autorotates "
+            f"(needs {float(rotor_power) / 1e3:.0f} kW): no powered trim"
+        )
+    return TrimCondition(forward_speed, thrust_coefficient, pitch, float(rotor_power), float(climb_rate))
+
+
+def trim_level_flight(airframe: Airframe, forward_speed: float) -> TrimCondition:
+    """Trims level flight (y = 0): :func:`trim_flight` at zero climb rate."""
+    return trim_flight(airframe, forward_speed, 0.0)
 
 
 def initial_state_after_failure(
-    airframe: Airframe, height: float, forward_speed: float, power_fraction: float = 0.0
+    airframe: Airframe,
+    height: float,
+    forward_speed: float,
+    power_fraction: float = 0.0,
+    climb_rate: float = 0.0,
+    rotor_speed: float | None = None,
 ) -> HelicopterState:
-    """The state at the instant of an engine failure from level trim.
+    """The state at the instant of an engine failure from steady flight.
 
     Args:
         airframe: the helicopter.
         height: above ground, m.
         forward_speed: m/s.
-        power_fraction: engine power left, as a fraction of trim power (0 = total loss, the
-            paper's case); it then decays with the engine time constant κ.
+        power_fraction: engine power left, as a fraction of the power the rotor absorbed in that
+            flight (0 = total loss, the paper's case); it then decays with the engine time constant κ.
+        climb_rate: m/s, positive up (0 = level trim, the default); the flight is trimmed on that path.
+        rotor_speed: rad/s at the failure (None = Ω₀, the trim's).
     """
     if not 0.0 <= power_fraction <= 1.0:
         raise ValueError(f"power fraction must lie in [0, 1], got {power_fraction!r}")
     if not np.isfinite(height):
         raise ValueError(f"height must be finite, got {height!r}")
-    trim = trim_level_flight(airframe, forward_speed)
-    return HelicopterState(0.0, forward_speed, airframe.nominal_rotor_speed, height, 0.0, power_fraction * trim.power)
+    if rotor_speed is not None and not (np.isfinite(rotor_speed) and rotor_speed > 0.0):
+        raise ValueError(f"rotor speed must be finite and > 0 rad/s, got {rotor_speed!r}")
+    trim = trim_flight(airframe, forward_speed, climb_rate)
+    omega = airframe.nominal_rotor_speed if rotor_speed is None else float(rotor_speed)
+    return HelicopterState(-trim.climb_rate, forward_speed, omega, height, 0.0, power_fraction * trim.power)
 
 
 def state_from_sensors(

@@ -1,0 +1,391 @@
+"""Landing solves in worker processes: no GIL shared with a busy ROS executor, a hung solve can be killed.
+
+CasADi re-takes the GIL between IPOPT iterations and around every CVODES call of the replay, so a solve in
+the same process as a busy rclpy executor waits for it (measured: one busy Python thread makes the same solve
+3.9× slower). A :class:`SolverPool` runs :meth:`~helireach_ros.core.planner.LandingPlanner.plan` (solve +
+independent replay + classification, exactly as in process) in ``workers`` processes of their own, each with
+the NLP built once and warmed up.
+
+- **Wire format.** Requests and plans cross the pipe as numpy arrays (:mod:`helireach_ros.core.array_codec`),
+  never as pickles: the parent only ever decodes arrays into the dataclasses it expects.
+- **Priorities.** Jobs are served lowest ``priority`` first (:data:`PRIORITY_FAILURE` before
+  :data:`PRIORITY_LIVE`), first come first served within one priority. With two or more workers, low-priority
+  jobs never occupy the last free worker, so a failure plan never waits for a live evaluation.
+- **Supervision.** A worker that dies (any exit) or does not answer within the job's ``timeout_s`` is killed
+  and restarted in the background; the job's future fails with :class:`SolverWorkerError` at once (within one
+  supervision tick, :data:`SUPERVISION_PERIOD_S`, of the death or the timeout), and the caller falls back as it
+  would after a failed solve. :attr:`SolverPool.restarts` counts restarts for diagnostics.
+- **Start method.** ``forkserver`` (or ``spawn``), never ``fork``: the parent runs rclpy's threads.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import multiprocessing
+import os
+import threading
+import time
+from concurrent.futures import Future
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+import numpy as np
+
+from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
+from helireach_ros.core.planner import LandingPlan, WarmStart
+from helireach_ros.core.settings import PlannerSettings
+
+__all__ = [
+    "PRIORITY_FAILURE",
+    "PRIORITY_LIVE",
+    "SUPERVISION_PERIOD_S",
+    "SolverPool",
+    "SolverPoolSettings",
+    "SolverWorkerError",
+]
+
+PRIORITY_FAILURE = 0
+"""Priority of a plan after an engine failure (served first)."""
+PRIORITY_LIVE = 10
+"""Priority of a live evaluation before any failure."""
+SUPERVISION_PERIOD_S = 0.01
+"""How often the dispatcher checks for hung workers when nothing else wakes it, s."""
+
+_READY = b"ready"
+_STOP = b"stop"
+
+
+class SolverWorkerError(RuntimeError):
+    """A solve did not come back: its worker died or hung (it was killed and is being restarted)."""
+
+
+@dataclass(frozen=True)
+class SolverPoolSettings:
+    """How the pool runs.
+
+    Attributes:
+        workers: worker processes (≥ 1; each holds one NLP, ~100 MB).
+        start_method: ``"forkserver"`` or ``"spawn"`` (``fork`` is refused: the parent may run threads).
+        warm_up: each worker solves one landing before it reports ready (first-call costs).
+        default_timeout_s: a job's timeout when the caller gives none, s.
+    """
+
+    workers: int = 2
+    start_method: str = "forkserver"
+    warm_up: bool = True
+    default_timeout_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.workers, int) or self.workers < 1:
+            raise ValueError(f"workers must be an integer >= 1, got {self.workers!r}")
+        if self.start_method not in ("forkserver", "spawn"):
+            raise ValueError(f"start_method must be 'forkserver' or 'spawn', got {self.start_method!r}")
+        if not (np.isfinite(self.default_timeout_s) and self.default_timeout_s > 0.0):
+            raise ValueError(f"default_timeout_s must be > 0, got {self.default_timeout_s!r}")
+
+
+@dataclass(frozen=True)
+class _SolveRequest:
+    state: np.ndarray
+    warm_start: WarmStart | None
+
+
+@dataclass(frozen=True)
+class _SolveReply:
+    plan: LandingPlan | None
+    error: str
+
+
+def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSettings, warm_up: bool) -> None:
+    """A worker: builds the NLP, warms it up, then answers requests until told to stop or the pipe closes."""
+    from helireach_ros.core.model import initial_state_after_failure
+    from helireach_ros.core.planner import get_planner
+
+    planner = get_planner(airframe, settings)
+    if warm_up:
+        planner.plan(initial_state_after_failure(airframe, 150.0, 38.0))
+    connection.send_bytes(_READY)
+    while True:
+        try:
+            data = connection.recv_bytes()
+        except (EOFError, OSError):
+            return
+        if data == _STOP:
+            return
+        try:
+            request = decode_dataclass(_SolveRequest, data)
+            reply = _SolveReply(planner.plan(request.state, request.warm_start), "")
+        except (ValueError, RuntimeError) as error:
+            reply = _SolveReply(None, f"{type(error).__name__}: {error}")
+        connection.send_bytes(encode_dataclass(reply))
+
+
+@dataclass
+class _Job:
+    payload: bytes
+    future: Future
+    timeout_s: float
+    priority: int
+    started: float = 0.0
+
+
+class _Worker:
+    """One worker process and the parent's end of its pipe."""
+
+    def __init__(self, context: Any, airframe: Airframe, settings: PlannerSettings, warm_up: bool) -> None:
+        self.connection, child = context.Pipe(duplex=True)
+        self.process = context.Process(
+            target=_worker_main, args=(child, airframe, settings, warm_up), name="helireach_solver", daemon=True
+        )
+        self.process.start()
+        child.close()
+        self.ready = False
+        self.job: _Job | None = None
+
+    def kill(self) -> None:
+        if self.process.is_alive():
+            self.process.kill()
+        self.process.join(timeout=5.0)
+        self.connection.close()
+
+
+class SolverPool:
+    """Landing solves in worker processes (see the module docstring).
+
+    Args:
+        airframe: the airframe every worker plans for.
+        settings: planner settings (default: the ``verified`` method).
+        pool_settings: workers, start method, warm-up, default timeout.
+    """
+
+    def __init__(
+        self,
+        airframe: Airframe,
+        settings: PlannerSettings | None = None,
+        pool_settings: SolverPoolSettings | None = None,
+    ) -> None:
+        self.airframe = airframe
+        self.settings = settings or PlannerSettings()
+        self.pool_settings = pool_settings or SolverPoolSettings()
+        self._context = multiprocessing.get_context(self.pool_settings.start_method)
+        if self.pool_settings.start_method == "forkserver":
+            self._context.set_forkserver_preload(["helireach_ros.core.solver_pool"])
+        self._lock = threading.Lock()
+        self._queue: list[tuple[int, int, _Job]] = []
+        self._sequence = itertools.count()
+        self._closed = False
+        self.restarts = 0
+        self.last_error = ""
+        self._wake_reader, self._wake_writer = os.pipe()
+        self._workers = [self._start_worker() for _ in range(self.pool_settings.workers)]
+        self._dispatcher = threading.Thread(target=self._dispatch, name="helireach_solver_pool", daemon=True)
+        self._dispatcher.start()
+
+    # -- public ----------------------------------------------------------------------------------------------
+    def submit(
+        self,
+        state: np.ndarray,
+        warm_start: WarmStart | None = None,
+        priority: int = PRIORITY_FAILURE,
+        timeout_s: float | None = None,
+    ) -> Future:
+        """Queues a solve; the future gives the :class:`~helireach_ros.core.planner.LandingPlan`.
+
+        The future raises :class:`ValueError` for a state the planner refuses, and
+        :class:`SolverWorkerError` when the worker died or did not answer within ``timeout_s`` (counted
+        from when a worker took the job).
+        """
+        future: Future = Future()
+        payload = encode_dataclass(_SolveRequest(np.asarray(state, dtype=float).reshape(-1), warm_start))
+        job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority)
+        with self._lock:
+            if self._closed:
+                raise RuntimeError("the solver pool is closed")
+            heapq.heappush(self._queue, (priority, next(self._sequence), job))
+        self._wake()
+        return future
+
+    def plan(
+        self,
+        state: np.ndarray,
+        warm_start: WarmStart | None = None,
+        priority: int = PRIORITY_FAILURE,
+        timeout_s: float | None = None,
+    ) -> LandingPlan:
+        """Solves and waits: :meth:`submit` then the result (queue time included in the wait)."""
+        timeout = timeout_s or self.pool_settings.default_timeout_s
+        future = self.submit(state, warm_start, priority, timeout)
+        return future.result(timeout=None)
+
+    def wait_ready(self, timeout_s: float, count: int = 1) -> bool:
+        """Waits until at least ``count`` workers are ready (NLP built, warmed up); returns whether they are."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self.ready_workers >= count:
+                return True
+            time.sleep(0.01)
+        return self.ready_workers >= count
+
+    @property
+    def ready_workers(self) -> int:
+        """Workers that have built their NLP and can take a job."""
+        with self._lock:
+            return sum(worker.ready and worker.process.is_alive() for worker in self._workers)
+
+    @property
+    def busy_workers(self) -> int:
+        """Workers solving now."""
+        with self._lock:
+            return sum(worker.job is not None for worker in self._workers)
+
+    def worker_pids(self) -> list[int]:
+        """The workers' process ids (e.g. for a test that kills one)."""
+        with self._lock:
+            return [worker.process.pid for worker in self._workers if worker.process.pid is not None]
+
+    def close(self) -> None:
+        """Stops the workers (queued and running jobs fail with :class:`SolverWorkerError`)."""
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+        self._wake()
+        self._dispatcher.join(timeout=10.0)
+        os.close(self._wake_reader)
+        os.close(self._wake_writer)
+
+    def __enter__(self) -> SolverPool:
+        return self
+
+    def __exit__(self, *exc_info: object) -> None:
+        self.close()
+
+    # -- dispatcher thread -----------------------------------------------------------------------------------
+    def _start_worker(self) -> _Worker:
+        return _Worker(self._context, self.airframe, self.settings, self.pool_settings.warm_up)
+
+    def _wake(self) -> None:
+        try:
+            os.write(self._wake_writer, b"x")
+        except OSError:
+            pass
+
+    def _assign(self) -> None:
+        """Hands queued jobs to idle ready workers, keeping one worker free of low-priority work."""
+        with self._lock:
+            idle = [
+                worker
+                for worker in self._workers
+                if worker.ready and worker.job is None and worker.process.is_alive()
+            ]
+            busy_low = sum(
+                1 for worker in self._workers if worker.job is not None and worker.job.priority > PRIORITY_FAILURE
+            )
+            while idle and self._queue:
+                priority = self._queue[0][0]
+                if priority > PRIORITY_FAILURE and len(self._workers) > 1 and busy_low >= len(self._workers) - 1:
+                    break
+                _, _, job = heapq.heappop(self._queue)
+                if not job.future.set_running_or_notify_cancel():
+                    continue
+                worker = idle.pop()
+                job.started = time.monotonic()
+                worker.job = job
+                busy_low += priority > PRIORITY_FAILURE
+                try:
+                    worker.connection.send_bytes(job.payload)
+                except OSError:
+                    pass  # a dead worker: its sentinel fails the job on the next pass
+
+    def _replace(self, worker: _Worker, reason: str) -> None:
+        """Kills a dead or hung worker, fails its job, starts a new one (ready later, in the background)."""
+        job = worker.job
+        worker.job = None
+        worker.kill()
+        self.restarts += 1
+        self.last_error = reason
+        if job is not None:
+            job.future.set_exception(SolverWorkerError(f"{reason}; the worker was restarted"))
+        if not self._closed:
+            replacement = self._start_worker()
+            with self._lock:
+                self._workers[self._workers.index(worker)] = replacement
+
+    def _dispatch(self) -> None:
+        while True:
+            with self._lock:
+                closed = self._closed
+            if closed:
+                self._stop_all()
+                return
+            with self._lock:
+                workers = list(self._workers)
+            now = time.monotonic()
+            for worker in workers:  # answers, deaths and time-outs first: a dead worker gets no new job
+                self._service(worker, now)
+            self._assign()
+            with self._lock:
+                workers = list(self._workers)
+            waitables: list[Any] = [self._wake_reader]
+            for worker in workers:
+                waitables += [worker.connection, worker.process.sentinel]
+            for ready in wait(waitables, timeout=SUPERVISION_PERIOD_S):
+                if ready == self._wake_reader:
+                    os.read(self._wake_reader, 4096)
+
+    def _service(self, worker: _Worker, now: float) -> None:
+        """Reads a worker's answer, or replaces it when it died or its job timed out."""
+        try:
+            has_data = worker.connection.poll()
+        except (OSError, EOFError):
+            has_data = False
+        if has_data:
+            try:
+                data = worker.connection.recv_bytes()
+            except (EOFError, OSError):
+                data = None
+            if data == _READY:
+                with self._lock:
+                    worker.ready = True
+                return
+            if data is not None and worker.job is not None:
+                job, worker.job = worker.job, None
+                try:
+                    reply = decode_dataclass(_SolveReply, data)
+                except ValueError as error:
+                    job.future.set_exception(SolverWorkerError(f"unreadable answer from the worker: {error}"))
+                    return
+                if reply.plan is None:
+                    job.future.set_exception(ValueError(reply.error))
+                else:
+                    job.future.set_result(reply.plan)
+                return
+        if not worker.process.is_alive():
+            self._replace(worker, f"solver worker {worker.process.pid} died (exit code {worker.process.exitcode})")
+        elif worker.job is not None and now - worker.job.started > worker.job.timeout_s:
+            self._replace(
+                worker,
+                f"solver worker {worker.process.pid} gave no answer within {worker.job.timeout_s:g} s",
+            )
+
+    def _stop_all(self) -> None:
+        with self._lock:
+            queued = [job for _, _, job in self._queue]
+            self._queue.clear()
+            workers = list(self._workers)
+        for job in queued:
+            if not job.future.done():
+                job.future.set_exception(SolverWorkerError("the solver pool was closed"))
+        for worker in workers:
+            if worker.job is not None and not worker.job.future.done():
+                worker.job.future.set_exception(SolverWorkerError("the solver pool was closed"))
+            try:
+                worker.connection.send_bytes(_STOP)
+            except OSError:
+                pass
+        for worker in workers:
+            worker.process.join(timeout=2.0)
+            worker.kill()
