@@ -1,0 +1,204 @@
+"""Live reachability: "if the engine failed now, could we land?" answered continuously from the measured state.
+
+Before any failure the planner evaluates, at ``rate_hz``, the landing NLP from the latest valid measured state
+with the engine assumed to fail at that instant: the state is the measured one (descent rate, speed, rotor
+speed, height) with the engine power replaced by what is left after the failure,
+
+.. math:: P_0 = \\text{power\\_fraction} \\cdot P_{\\text{measured}},
+
+decaying with the engine time constant as in every plan (``power_fraction`` 0 = total power loss, the
+default). Each evaluation is warm-started from the previous live solution (the state moves little between
+two evaluations), and is a full :meth:`~helireach_ros.core.planner.LandingPlanner.plan`: solve, independent
+replay, classification. Its verdict is therefore exactly what ``helireach plan`` says for that state.
+
+When the latest live verdict is ``safe`` (replay-verified), its plan is the **standby plan**: when the engine
+fails, a standby made from a state at most ``standby_max_age_s`` older than the failure is published at once,
+flagged ``standby``, before the planner re-plans from the state at the failure. A newer verdict that is not safe
+withdraws the standby.
+
+A verdict is evidence about one state at one time: :meth:`LiveVerdict.is_current` says whether it still is
+(its state not older than ``max_verdict_age_s``). Pure policy, no threads, no ROS: times are passed in (ns).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from helireach_ros.core.planner import LandingPlan, WarmStart
+
+__all__ = ["LiveEvaluator", "LiveSettings", "LiveVerdict", "failure_now_state"]
+
+
+@dataclass(frozen=True)
+class LiveSettings:
+    """The live evaluation's policy (planner node parameters of the same names).
+
+    Attributes:
+        rate_hz: evaluations per second (at most; one at a time).
+        power_fraction: engine power left after the assumed failure, as a fraction of the measured power.
+        max_state_age_s: a state older than this when an evaluation starts is not evaluated, s.
+        max_verdict_age_s: a verdict whose state is older than this is no longer evidence, s.
+        standby_max_age_s: the standby plan is used only if its state is at most this much older than the
+            failure, s.
+    """
+
+    rate_hz: float = 5.0
+    power_fraction: float = 0.0
+    max_state_age_s: float = 0.3
+    max_verdict_age_s: float = 1.0
+    standby_max_age_s: float = 0.3
+
+    def __post_init__(self) -> None:
+        for name in ("rate_hz", "max_state_age_s", "max_verdict_age_s", "standby_max_age_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be a positive number, got {value!r}")
+        if not 0.0 <= self.power_fraction <= 1.0:
+            raise ValueError(f"power_fraction must lie in [0, 1], got {self.power_fraction!r}")
+
+    @property
+    def period_ns(self) -> int:
+        """Time between two evaluations, ns."""
+        return int(1e9 / self.rate_hz)
+
+
+@dataclass(frozen=True)
+class LiveVerdict:
+    """One live evaluation.
+
+    Attributes:
+        status: the plan's status (``safe``, ``unsafe``, ``unverified``, ``failed``) or ``error`` (the solve
+            raised: a refused state, a dead solver worker; ``reason`` says which).
+        value: the NLP value J (≤ 0: a safe landing reachable), NaN without a plan.
+        state: the evaluated state (y, v, Ω, h, z, P₀), SI.
+        state_stamp_ns: stamp of the measurement it comes from.
+        evaluated_at_ns: when the evaluation finished.
+        solve_time_ms: wall time of the evaluation (solve + replay + transport), ms.
+        plan: the plan (None for ``error``).
+        reason: why there is no plan, for ``error``.
+    """
+
+    status: str
+    value: float
+    state: np.ndarray
+    state_stamp_ns: int
+    evaluated_at_ns: int
+    solve_time_ms: float
+    plan: LandingPlan | None = None
+    reason: str = ""
+
+    @property
+    def safe(self) -> bool:
+        """The landing from this state is reachable and the replay confirmed it."""
+        return self.status == "safe" and self.plan is not None and self.plan.safe
+
+    def state_age_s(self, now_ns: int) -> float:
+        """How old the evaluated state is at ``now_ns``, s."""
+        return (now_ns - self.state_stamp_ns) * 1e-9
+
+    def is_current(self, now_ns: int, settings: LiveSettings) -> bool:
+        """Whether the verdict still speaks for the aircraft: its state at most ``max_verdict_age_s`` old."""
+        return 0.0 <= self.state_age_s(now_ns) <= settings.max_verdict_age_s
+
+
+def failure_now_state(measured_state: np.ndarray, power_fraction: float) -> np.ndarray:
+    """The state if the engine failed at the measurement: the measured state with P₀ = fraction × measured P."""
+    state = np.array(measured_state, dtype=float).reshape(-1)
+    if state.shape != (6,):
+        raise ValueError(f"a helicopter state has 6 components, got shape {state.shape}")
+    state[5] = power_fraction * max(state[5], 0.0)
+    return state
+
+
+class LiveEvaluator:
+    """Schedules live evaluations, warm-starts each from the last, and keeps the standby plan.
+
+    Args:
+        settings: the policy.
+        solve: ``solve(state, warm_start) -> LandingPlan`` (in process, or through a solver pool); may raise
+            ``ValueError``/``RuntimeError``, which become an ``error`` verdict.
+    """
+
+    def __init__(self, settings: LiveSettings, solve: Callable[[np.ndarray, WarmStart | None], LandingPlan]) -> None:
+        self.settings = settings
+        self._solve = solve
+        self.latest: LiveVerdict | None = None
+        self.standby_verdict: LiveVerdict | None = None
+        self._warm_start: WarmStart | None = None
+        self._last_started_ns: int | None = None
+        self.evaluations = 0
+        self.errors = 0
+
+    def due(self, now_ns: int) -> bool:
+        """Whether the next evaluation is due (one per period)."""
+        return self._last_started_ns is None or now_ns - self._last_started_ns >= self.settings.period_ns
+
+    def evaluate(
+        self,
+        measured_state: np.ndarray,
+        state_stamp_ns: int,
+        now_ns: int,
+        clock_ns: Callable[[], int],
+        fallback_warm_start: WarmStart | None = None,
+    ) -> LiveVerdict | None:
+        """Evaluates one measured state (blocking); returns the verdict, or None if the state is too old.
+
+        Args:
+            measured_state: (y, v, Ω, h, z, P_measured), SI.
+            state_stamp_ns: its stamp.
+            now_ns: now (the evaluation's start).
+            clock_ns: the clock, read again when the solve returns.
+            fallback_warm_start: used when there is no previous live solution (e.g. the envelope's nearest plan).
+        """
+        self._last_started_ns = now_ns
+        if (now_ns - state_stamp_ns) * 1e-9 > self.settings.max_state_age_s:
+            return None
+        state = failure_now_state(measured_state, self.settings.power_fraction)
+        warm_start = self._warm_start or fallback_warm_start
+        try:
+            plan = self._solve(state, warm_start)
+        except (ValueError, RuntimeError) as error:
+            finished = clock_ns()
+            self.errors += 1
+            verdict = LiveVerdict(
+                "error", math.nan, state, state_stamp_ns, finished, (finished - now_ns) * 1e-6, None,
+                f"{type(error).__name__}: {error}",
+            )
+            self._warm_start = None
+            self.latest = verdict
+            self.standby_verdict = None
+            return verdict
+        finished = clock_ns()
+        self.evaluations += 1
+        verdict = LiveVerdict(
+            plan.status, plan.value, state, state_stamp_ns, finished, (finished - now_ns) * 1e-6, plan
+        )
+        # Only a converged solution is a good start for the next one (a failed solve's iterate may be anywhere).
+        self._warm_start = plan.warm_start if plan.solver.success else None
+        self.latest = verdict
+        # The standby is the latest verdict or nothing: an older safe plan after a newer unsafe verdict
+        # would answer for a state the aircraft has left.
+        self.standby_verdict = verdict if verdict.safe else None
+        return verdict
+
+    def standby(self, failure_stamp_ns: int) -> LiveVerdict | None:
+        """The standby plan for a failure at ``failure_stamp_ns``: the latest safe live verdict, if fresh enough.
+
+        Fresh enough: its state is at most ``standby_max_age_s`` older than the failure (and not after it).
+        """
+        verdict = self.standby_verdict
+        if verdict is None:
+            return None
+        age_s = (failure_stamp_ns - verdict.state_stamp_ns) * 1e-9
+        return verdict if 0.0 <= age_s <= self.settings.standby_max_age_s else None
+
+    def reset(self) -> None:
+        """Forgets every verdict and the warm start (e.g. after a failure episode or an airframe change)."""
+        self.latest = None
+        self.standby_verdict = None
+        self._warm_start = None
+        self._last_started_ns = None
