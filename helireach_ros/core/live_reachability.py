@@ -165,7 +165,13 @@ class LiveEvaluator:
             finished = clock_ns()
             self.errors += 1
             verdict = LiveVerdict(
-                "error", math.nan, state, state_stamp_ns, finished, (finished - now_ns) * 1e-6, None,
+                "error",
+                math.nan,
+                state,
+                state_stamp_ns,
+                finished,
+                (finished - now_ns) * 1e-6,
+                None,
                 f"{type(error).__name__}: {error}",
             )
             self._warm_start = None

@@ -277,9 +277,7 @@ class SolverPool:
         """Hands queued jobs to idle ready workers, keeping one worker free of low-priority work."""
         with self._lock:
             idle = [
-                worker
-                for worker in self._workers
-                if worker.ready and worker.job is None and worker.process.is_alive()
+                worker for worker in self._workers if worker.ready and worker.job is None and worker.process.is_alive()
             ]
             busy_low = sum(
                 1 for worker in self._workers if worker.job is not None and worker.job.priority > PRIORITY_FAILURE

@@ -125,11 +125,14 @@ class EnvelopeQuery:
             the grid or when an enclosing node failed.
         margin: signed distance to the not-proven-safe set in the (ft, kt) plane: > 0 when safe,
             < 0 otherwise; ±inf if there is no such boundary; NaN outside the grid.
+        by_interpolation: the enclosing grid nodes disagree (some safe, some not): the point itself is
+            neither proven safe nor proven unsafe by the grid.
     """
 
     status: str
     value: float
     margin: float
+    by_interpolation: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (non-finite numbers become None)."""
@@ -320,7 +323,7 @@ class Envelope:
         status = max(names, key=_CONSERVATISM.__getitem__)
         value = float(np.max(self.value[np.ix_(rows, columns)]))
         margin = self._margin_geometry.margin(height_m / FT, speed_ms / KT, status == "safe")
-        return EnvelopeQuery(status, value, margin)
+        return EnvelopeQuery(status, value, margin, "safe" in names and len(set(names)) > 1)
 
     def status_at(self, height_m: float, speed_ms: float) -> str:
         """Shortcut for ``query(height_m, speed_ms).status``."""

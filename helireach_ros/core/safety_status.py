@@ -1,0 +1,263 @@
+"""The published safety status: never wider than its evidence.
+
+Two kinds of evidence can say SAFE before a failure: the **envelope** (a level-trim H-V table, valid only
+inside its :class:`~helireach_ros.core.envelope.domain.ValidityDomain`) and the **live verdict** (the landing
+NLP solved and replayed from the measured state, :mod:`helireach_ros.core.live_reachability`). After a
+failure, the only evidence is the planner's **current plan**. Levels are
+``diagnostic_msgs/DiagnosticStatus`` names (the ROS layer maps them).
+
+Before a failure (the rules, in order):
+
+================================================  ===========================================================
+situation                                         status
+================================================  ===========================================================
+no valid, fresh state                             STALE (why)
+inside the domain, current live verdict           the more conservative of the two; except that a
+                                                  replay-verified live SAFE overrides an envelope answer
+                                                  that is not-safe *only by interpolation* (the enclosing
+                                                  grid nodes disagree), and the text says so
+inside the domain, no current live verdict        the envelope's answer
+outside the domain, current live verdict          the live verdict alone (the text names the domain breach)
+outside the domain, no current live verdict       STALE: no evidence covers this state (the text says why)
+no envelope                                       the live verdict, else STALE
+rotor speed not measured                          at most WARN (the envelope assumes Ω₀)
+================================================  ===========================================================
+
+Envelope answers: OK safe and at least ``warn_margin`` (ft/kt) from the boundary, WARN safe but closer,
+ERROR not proven safe (unsafe, unverified, failed or outside the grid). Live answers: OK safe, WARN safe
+with J above ``live_warn_value`` (a touchdown near a limit), ERROR anything else (unsafe, unverified,
+failed, solver error).
+
+After a failure (episode ``failed``) the status is the current plan's: OK for a replay-verified plan
+(standby or refined), ERROR for a fallback (never verified), an unverified or unsafe plan, or no plan yet.
+``landed``: STALE (the envelope does not apply on the ground). ``ended`` (engine recovered): the rules
+before a failure apply again.
+
+Input problems (an input with incompatible QoS, :mod:`helireach_ros.core.qos_problems`) make any status
+ERROR, whatever the evidence.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+from helireach_ros.core.envelope.domain import DomainCheck
+from helireach_ros.core.units import FT, KT
+
+__all__ = [
+    "LEVEL_ORDER",
+    "EnvelopeEvidence",
+    "LiveEvidence",
+    "PlanEvidence",
+    "SafetyDecision",
+    "decide_safety_status",
+    "more_conservative",
+]
+
+LEVEL_ORDER = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
+"""Conservatism of the levels (a higher one wins): STALE (no evidence) above ERROR (evidence of danger)."""
+
+
+def more_conservative(first: str, second: str) -> str:
+    """The more conservative of two level names."""
+    return first if LEVEL_ORDER[first] >= LEVEL_ORDER[second] else second
+
+
+@dataclass(frozen=True)
+class EnvelopeEvidence:
+    """The envelope's answer at the measured height and speed.
+
+    Attributes:
+        status: the query's status (``safe``, ``unsafe``, ``unverified``, ``failed``, ``outside``).
+        margin: ft/kt from the not-proven-safe set (signed).
+        by_interpolation: the enclosing grid nodes disagree (some safe, some not).
+        domain: whether the measured state lies in the envelope's validity domain.
+    """
+
+    status: str
+    margin: float
+    by_interpolation: bool
+    domain: DomainCheck
+
+
+@dataclass(frozen=True)
+class LiveEvidence:
+    """A live verdict (:class:`~helireach_ros.core.live_reachability.LiveVerdict`) as the status sees it.
+
+    Attributes:
+        status: ``safe``, ``unsafe``, ``unverified``, ``failed`` or ``error``.
+        value: the NLP value J.
+        verified: the replay landed within limits.
+        state_age_s: how old its state is now, s.
+        current: young enough to be evidence.
+        reason: for ``error``.
+    """
+
+    status: str
+    value: float
+    verified: bool
+    state_age_s: float
+    current: bool
+    reason: str = ""
+
+
+@dataclass(frozen=True)
+class PlanEvidence:
+    """The planner's current plan after a failure (None in :func:`decide_safety_status`: no plan yet).
+
+    Attributes:
+        status: the plan status as published (``safe``, ``unsafe``, ``unverified``, ``fallback``, ``none``, ...).
+        verified: a replay-verified safe plan.
+        standby: made before the failure by the live evaluation.
+        time_to_land_s: s.
+    """
+
+    status: str
+    verified: bool
+    standby: bool = False
+    time_to_land_s: float = math.nan
+
+
+@dataclass(frozen=True)
+class SafetyDecision:
+    """The status to publish: level name, one line for people, what it rests on, and published values."""
+
+    level: str
+    message: str
+    source: str
+    values: dict[str, Any] = field(default_factory=dict)
+
+
+def _where(height: float, speed: float) -> str:
+    return f"{height / FT:.0f} ft, {speed / KT:.0f} kt"
+
+
+def _envelope_level(evidence: EnvelopeEvidence, warn_margin: float) -> tuple[str, str]:
+    if evidence.status == "safe":
+        if evidence.margin >= warn_margin:
+            return "OK", f"SAFE: margin {evidence.margin:.0f}"
+        return "WARN", f"CAUTION: {evidence.margin:.0f} from the boundary"
+    if evidence.status == "outside":
+        return "ERROR", "AVOID: outside the envelope grid, unknown"
+    if evidence.status == "unsafe":
+        return "ERROR", "AVOID: no safe landing"
+    return "ERROR", f"AVOID: safe landing not proven, {evidence.status}"
+
+
+def _live_level(evidence: LiveEvidence, live_warn_value: float) -> tuple[str, str]:
+    if evidence.status == "safe" and evidence.verified:
+        if evidence.value > live_warn_value:
+            return "WARN", f"CAUTION (live): landing near a limit, J {evidence.value:+.2f}"
+        return "OK", f"SAFE (live, verified): J {evidence.value:+.2f}"
+    if evidence.status == "unsafe":
+        return "ERROR", f"AVOID (live): no safe landing from this state, J {evidence.value:+.2f}"
+    if evidence.status == "error":
+        return "ERROR", f"AVOID (live): not evaluated ({evidence.reason})"
+    return "ERROR", f"AVOID (live): safe landing not proven, {evidence.status}"
+
+
+def _after_failure(plan: PlanEvidence | None) -> tuple[str, str, str]:
+    if plan is None:
+        return "ERROR", "ENGINE FAILURE: no landing plan yet", "plan"
+    if plan.verified and plan.status == "safe":
+        kind = "standby plan" if plan.standby else "landing plan"
+        return "OK", f"ENGINE FAILURE: {kind} verified, land in {plan.time_to_land_s:.1f} s", "plan"
+    if plan.status == "fallback":
+        return "ERROR", "ENGINE FAILURE: FALLBACK controls, not verified", "plan"
+    return "ERROR", f"ENGINE FAILURE: plan {plan.status}, not verified", "plan"
+
+
+def decide_safety_status(
+    *,
+    height: float,
+    forward_speed: float,
+    state_problem: str = "",
+    envelope: EnvelopeEvidence | None,
+    envelope_note: str = "",
+    live: LiveEvidence | None,
+    episode: str = "normal",
+    plan: PlanEvidence | None = None,
+    input_problems: Sequence[str] = (),
+    warn_margin: float = 20.0,
+    live_warn_value: float = -0.1,
+) -> SafetyDecision:
+    """The safety status from every piece of evidence (the rules are in the module docstring).
+
+    Args:
+        height, forward_speed: the measured state, m and m/s (for the text).
+        state_problem: why there is no valid, fresh state ('' = there is one).
+        envelope: the envelope's answer, or None (no envelope: ``envelope_note`` says why).
+        envelope_note: why there is no envelope.
+        live: the latest live verdict, or None.
+        episode: the failure episode's state (``normal``, ``failed``, ``ended``, ``landed``).
+        plan: the planner's current plan after a failure.
+        input_problems: inputs with incompatible QoS (each makes the status ERROR).
+        warn_margin: envelope WARN margin, ft/kt.
+        live_warn_value: live WARN above this J.
+    """
+    values: dict[str, Any] = {"episode": episode}
+    if episode == "failed":
+        level, text, source = _after_failure(plan)
+    elif episode == "landed":
+        level, text, source = "STALE", "LANDED: the envelope does not apply on the ground", "none"
+    elif state_problem:
+        level, text, source = "STALE", f"NO DATA: {state_problem}", "none"
+    else:
+        level, text, source = _before_failure(
+            _where(height, forward_speed), envelope, envelope_note, live, warn_margin, live_warn_value, values
+        )
+    if input_problems:
+        problems = "; ".join(input_problems)
+        values["input_qos_problems"] = problems
+        level, text = "ERROR", f"INPUT QOS: incompatible QoS, not trusted ({problems}); {text}"
+    values["evidence"] = source
+    return SafetyDecision(level, text, source, values)
+
+
+def _before_failure(
+    where: str,
+    envelope: EnvelopeEvidence | None,
+    envelope_note: str,
+    live: LiveEvidence | None,
+    warn_margin: float,
+    live_warn_value: float,
+    values: dict[str, Any],
+) -> tuple[str, str, str]:
+    current_live = live if live is not None and live.current else None
+    if live is not None:
+        values.update(live_status=live.status, live_value=live.value, live_state_age_s=live.state_age_s)
+    if envelope is not None:
+        values.update(
+            envelope_status=envelope.status,
+            margin_ft_kt=envelope.margin,
+            in_domain=envelope.domain.inside,
+            domain=" ; ".join(envelope.domain.reasons),
+        )
+    if envelope is None or not envelope.domain.inside:
+        why = (
+            f"no envelope ({envelope_note})"
+            if envelope is None
+            else (f"outside the envelope's domain ({'; '.join(envelope.domain.reasons)})")
+        )
+        if current_live is None:
+            stale = "no current live verdict" if live is None else f"live verdict {live.state_age_s:.1f} s old"
+            return "STALE", f"NO DATA: {why} and {stale} ({where})", "none"
+        level, text = _live_level(current_live, live_warn_value)
+        return level, f"{text} ({where}; {why})", "live"
+    envelope_level, envelope_text = _envelope_level(envelope, warn_margin)
+    if not envelope.domain.known:
+        # The envelope assumes what was not measured: never better than CAUTION on its word alone.
+        envelope_level = more_conservative(envelope_level, "WARN")
+        envelope_text += f" ({'; '.join(envelope.domain.reasons)})"
+    if current_live is None:
+        return envelope_level, f"{envelope_text} ({where})", "envelope"
+    live_level, live_text = _live_level(current_live, live_warn_value)
+    if live_level == "OK" and envelope_level == "ERROR" and envelope.by_interpolation:
+        return "OK", f"{live_text} ({where}; the envelope is not proven safe here only by interpolation)", "live"
+    level = more_conservative(envelope_level, live_level)
+    source = "envelope+live"
+    text = envelope_text if LEVEL_ORDER[envelope_level] >= LEVEL_ORDER[live_level] else live_text
+    return level, f"{text} ({where}; envelope {envelope_level}, live {live_level})", source
