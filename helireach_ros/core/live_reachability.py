@@ -117,13 +117,18 @@ def failure_now_state(measured_state: np.ndarray, power_fraction: float) -> np.n
 class LiveEvaluator:
     """Schedules live evaluations, warm-starts each from the last, and keeps the standby plan.
 
+    Blocking use: :meth:`evaluate`. With a solver pool (asynchronous): :meth:`prepare`, submit the solve,
+    then :meth:`record` with its plan or error.
+
     Args:
         settings: the policy.
-        solve: ``solve(state, warm_start) -> LandingPlan`` (in process, or through a solver pool); may raise
-            ``ValueError``/``RuntimeError``, which become an ``error`` verdict.
+        solve: ``solve(state, warm_start) -> LandingPlan`` for :meth:`evaluate` (in process, or through a
+            solver pool); may raise ``ValueError``/``RuntimeError``, which become an ``error`` verdict.
     """
 
-    def __init__(self, settings: LiveSettings, solve: Callable[[np.ndarray, WarmStart | None], LandingPlan]) -> None:
+    def __init__(
+        self, settings: LiveSettings, solve: Callable[[np.ndarray, WarmStart | None], LandingPlan] | None = None
+    ) -> None:
         self.settings = settings
         self._solve = solve
         self.latest: LiveVerdict | None = None
@@ -137,6 +142,48 @@ class LiveEvaluator:
         """Whether the next evaluation is due (one per period)."""
         return self._last_started_ns is None or now_ns - self._last_started_ns >= self.settings.period_ns
 
+    def prepare(
+        self, measured_state: np.ndarray, state_stamp_ns: int, now_ns: int, fallback_warm_start: WarmStart | None = None
+    ) -> tuple[np.ndarray, WarmStart | None] | None:
+        """Starts an evaluation: (the engine-fails-now state, the warm start), or None if the state is too old.
+
+        Args:
+            measured_state: (y, v, Ω, h, z, P_measured), SI.
+            state_stamp_ns: its stamp.
+            now_ns: now (the evaluation's start; the schedule counts from here).
+            fallback_warm_start: used when there is no previous live solution (e.g. the envelope's nearest plan).
+        """
+        self._last_started_ns = now_ns
+        if (now_ns - state_stamp_ns) * 1e-9 > self.settings.max_state_age_s:
+            return None
+        return failure_now_state(measured_state, self.settings.power_fraction), self._warm_start or fallback_warm_start
+
+    def record(
+        self,
+        state: np.ndarray,
+        state_stamp_ns: int,
+        started_ns: int,
+        finished_ns: int,
+        plan: LandingPlan | None,
+        error: str = "",
+    ) -> LiveVerdict:
+        """Ends an evaluation with its plan (or the error that replaced it) and updates warm start and standby."""
+        elapsed_ms = (finished_ns - started_ns) * 1e-6
+        if plan is None:
+            self.errors += 1
+            verdict = LiveVerdict("error", math.nan, state, state_stamp_ns, finished_ns, elapsed_ms, None, error)
+            self._warm_start = None
+        else:
+            self.evaluations += 1
+            verdict = LiveVerdict(plan.status, plan.value, state, state_stamp_ns, finished_ns, elapsed_ms, plan)
+            # Only a converged solution is a good start for the next one (a failed solve's iterate may be anywhere).
+            self._warm_start = plan.warm_start if plan.solver.success else None
+        self.latest = verdict
+        # The standby is the latest verdict or nothing: an older safe plan after a newer unsafe verdict
+        # would answer for a state the aircraft has left.
+        self.standby_verdict = verdict if verdict.safe else None
+        return verdict
+
     def evaluate(
         self,
         measured_state: np.ndarray,
@@ -145,51 +192,18 @@ class LiveEvaluator:
         clock_ns: Callable[[], int],
         fallback_warm_start: WarmStart | None = None,
     ) -> LiveVerdict | None:
-        """Evaluates one measured state (blocking); returns the verdict, or None if the state is too old.
-
-        Args:
-            measured_state: (y, v, Ω, h, z, P_measured), SI.
-            state_stamp_ns: its stamp.
-            now_ns: now (the evaluation's start).
-            clock_ns: the clock, read again when the solve returns.
-            fallback_warm_start: used when there is no previous live solution (e.g. the envelope's nearest plan).
-        """
-        self._last_started_ns = now_ns
-        if (now_ns - state_stamp_ns) * 1e-9 > self.settings.max_state_age_s:
+        """One evaluation, blocking: :meth:`prepare`, the solve, :meth:`record` (None if the state is too old)."""
+        if self._solve is None:
+            raise RuntimeError("this evaluator has no solve function: use prepare() and record()")
+        prepared = self.prepare(measured_state, state_stamp_ns, now_ns, fallback_warm_start)
+        if prepared is None:
             return None
-        state = failure_now_state(measured_state, self.settings.power_fraction)
-        warm_start = self._warm_start or fallback_warm_start
+        state, warm_start = prepared
         try:
-            plan = self._solve(state, warm_start)
-        except (ValueError, RuntimeError) as error:
-            finished = clock_ns()
-            self.errors += 1
-            verdict = LiveVerdict(
-                "error",
-                math.nan,
-                state,
-                state_stamp_ns,
-                finished,
-                (finished - now_ns) * 1e-6,
-                None,
-                f"{type(error).__name__}: {error}",
-            )
-            self._warm_start = None
-            self.latest = verdict
-            self.standby_verdict = None
-            return verdict
-        finished = clock_ns()
-        self.evaluations += 1
-        verdict = LiveVerdict(
-            plan.status, plan.value, state, state_stamp_ns, finished, (finished - now_ns) * 1e-6, plan
-        )
-        # Only a converged solution is a good start for the next one (a failed solve's iterate may be anywhere).
-        self._warm_start = plan.warm_start if plan.solver.success else None
-        self.latest = verdict
-        # The standby is the latest verdict or nothing: an older safe plan after a newer unsafe verdict
-        # would answer for a state the aircraft has left.
-        self.standby_verdict = verdict if verdict.safe else None
-        return verdict
+            plan, error = self._solve(state, warm_start), ""
+        except (ValueError, RuntimeError) as exception:
+            plan, error = None, f"{type(exception).__name__}: {exception}"
+        return self.record(state, state_stamp_ns, now_ns, clock_ns(), plan, error)
 
     def standby(self, failure_stamp_ns: int) -> LiveVerdict | None:
         """The standby plan for a failure at ``failure_stamp_ns``: the latest safe live verdict, if fresh enough.
