@@ -140,3 +140,18 @@ def test_settings_are_validated() -> None:
         LiveSettings(rate_hz=0.0)
     with pytest.raises(ValueError, match="power_fraction"):
         LiveSettings(power_fraction=1.5)
+
+
+def test_a_warm_plan_that_fails_its_replay_is_solved_again_cold(airframe, settings, planner) -> None:
+    # Warm-started from 400 ft / 100 kt, the plan at 479 ft / 120 kt (124 ft/min down, rotor 95 %) skims the
+    # ground and fails its replay; the cold plan lands. The live verdict must be the cold one, as `helireach plan`.
+    previous = measured(airframe, 400, 100)
+    state = measured(airframe, 479, 120, -124, 95)
+    warm = planner.plan(failure_now_state(state, 0.0), planner.plan(failure_now_state(previous, 0.0)).warm_start)
+    assert warm.status == "unverified"  # the case exists (else this test proves nothing)
+    clock = Clock()
+    evaluator = LiveEvaluator(LiveSettings(), planner.plan)
+    evaluator.evaluate(previous, clock.now_ns, clock.now_ns, clock)
+    verdict = evaluator.evaluate(state, clock.now_ns, clock.now_ns, clock)
+    assert verdict.status == "safe" and verdict.plan.replay.lands_within_limits
+    assert verdict.status == plan_landing(failure_now_state(state, 0.0), airframe, settings).status

@@ -91,6 +91,7 @@ class SolverPoolSettings:
 class _SolveRequest:
     state: np.ndarray
     warm_start: WarmStart | None
+    cold_check: bool
 
 
 @dataclass(frozen=True)
@@ -101,6 +102,7 @@ class _SolveReply:
 
 def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSettings, warm_up: bool) -> None:
     """A worker: builds the NLP, warms it up, then answers requests until told to stop or the pipe closes."""
+    from helireach_ros.core.live_reachability import solve_with_cold_check
     from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import get_planner
 
@@ -117,7 +119,11 @@ def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSe
             return
         try:
             request = decode_dataclass(_SolveRequest, data)
-            reply = _SolveReply(planner.plan(request.state, request.warm_start), "")
+            if request.cold_check:
+                plan = solve_with_cold_check(planner.plan, request.state, request.warm_start)
+            else:
+                plan = planner.plan(request.state, request.warm_start)
+            reply = _SolveReply(plan, "")
         except (ValueError, RuntimeError) as error:
             reply = _SolveReply(None, f"{type(error).__name__}: {error}")
         connection.send_bytes(encode_dataclass(reply))
@@ -191,15 +197,18 @@ class SolverPool:
         warm_start: WarmStart | None = None,
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
+        cold_check: bool = False,
     ) -> Future:
         """Queues a solve; the future gives the :class:`~helireach_ros.core.planner.LandingPlan`.
 
-        The future raises :class:`ValueError` for a state the planner refuses, and
-        :class:`SolverWorkerError` when the worker died or did not answer within ``timeout_s`` (counted
-        from when a worker took the job).
+        ``cold_check``: a warm plan that is not safe is solved again cold in the worker
+        (:func:`~helireach_ros.core.live_reachability.solve_with_cold_check`). The future raises
+        :class:`ValueError` for a state the planner refuses, and :class:`SolverWorkerError` when the worker
+        died or did not answer within ``timeout_s`` (counted from when a worker took the job).
         """
         future: Future = Future()
-        payload = encode_dataclass(_SolveRequest(np.asarray(state, dtype=float).reshape(-1), warm_start))
+        request = _SolveRequest(np.asarray(state, dtype=float).reshape(-1), warm_start, cold_check)
+        payload = encode_dataclass(request)
         job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority)
         with self._lock:
             if self._closed:
