@@ -48,9 +48,17 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState
 from helireach_ros.core.units import FT, KT
 from helireach_ros.display.node import CockpitDisplay
-from helireach_ros.display.sections import banner_level, boundary_segments, path_section, rotor_limits_section
+from helireach_ros.display.sections import (
+    banner_level,
+    boundary_segments,
+    episode_section,
+    path_section,
+    plan_status_section,
+    rotor_limits_section,
+)
 from helireach_ros.display.server import DisplayServerError, web_directory
 from helireach_ros.ros import messages as rm
 
@@ -550,7 +558,67 @@ def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, r
         vehicle.plan_status_publisher.publish(fallback)
         await page.wait_for(PLAN, lambda p: p.get("badge") == "FALLBACK", "the FALLBACK badge")
 
+        # a plan verified from a state long after the failure: caution, never the green VERIFIED
+        if real_plan.verified and real_plan.safe:
+            late = plan_messages(real_plan, start)[2]
+            late.values.extend([KeyValue(key="late", value="true"), KeyValue(key="late_by_s", value="2.5")])
+            vehicle.plan_status_publisher.publish(late)
+            await page.wait_for(PLAN, lambda p: p.get("badge") == "VERIFIED \u00b7 LATE", "the LATE badge")
+
+        # the engine relit: the monitor's episode ENDED and the planner's plan status `ended` hide the plan
+        episode_publisher = vehicle.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, RELIABLE)
+        wait_until(lambda: episode_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        episode_publisher.publish(episode_message(EpisodePhase.ENDED))
+        vehicle.plan_status_publisher.publish(ended_plan_status())
+        plan = await page.wait_for(PLAN, lambda p: p["state"] == "ended" and p.get("badge") == "ENDED", "ENDED")
+        assert plan["shown"] is False
+        await page.wait_for("window.helireach.episode", lambda phase: phase == "ended", "the episode phase")
+        label = await page.evaluate("document.getElementById('failure-label').textContent")
+        assert label == "ENGINE RECOVERED \u00b7 EPISODE ENDED"
+        save_artifact(tmp_path, "display-ended.png", await page.screenshot())
+        assert page.errors == [], f"the page reported errors: {page.errors}"
+
     run_page(browser, display.url, scenario)
+
+
+def episode_message(phase: EpisodePhase) -> DiagnosticStatus:
+    """The monitor's ``/helireach/failure_episode`` for an episode 1 in ``phase``."""
+    ended = 2_000_000_000 if phase in (EpisodePhase.ENDED, EpisodePhase.LANDED) else None
+    state = EpisodeState(phase, 1, started_ns=1_000_000_000, ended_ns=ended, flag=phase is EpisodePhase.FAILED)
+    level = rm.DIAGNOSTIC_LEVELS[state.level_name]
+    return rm.diagnostic_status(level, "helireach_monitor: failure episode", state.text, "vehicle", state.as_values())
+
+
+def ended_plan_status() -> DiagnosticStatus:
+    """The planner's plan status once the episode ended (msg_docs/helireach_plan_status.md)."""
+    values = {"status": "ended", "safe": False, "verified": False, "fallback": False, "failure_id": 1}
+    text = "ENDED (engine recovered): no landing plan; the last trajectory no longer applies"
+    return rm.diagnostic_status(DiagnosticStatus.WARN, "helireach_planner: landing plan", text, "test", values)
+
+
+def test_episode_and_plan_status_sections_show_ended_and_late_never_verified_green() -> None:
+    ended = plan_status_section(ended_plan_status())
+    assert (ended["status"], ended["safe"], ended["verified"], ended["level"]) == ("ended", False, False, "caution")
+    for phase in EpisodePhase:
+        section = episode_section(episode_message(phase))
+        assert (section["phase"], section["episode_id"]) == (phase.value, 1)
+    assert episode_section(episode_message(EpisodePhase.ENDED))["message"].startswith("ENDED (engine recovered)")
+    broken = DiagnosticStatus(level=DiagnosticStatus.OK, values=[KeyValue(key="phase", value="ended")])
+    assert episode_section(broken)["phase"] == "unknown" and episode_section(broken)["level"] == "nodata"
+    late = rm.diagnostic_status(
+        DiagnosticStatus.WARN,
+        "helireach_planner: landing plan",
+        "LATE (state 3.5 s after the failure, 2.5 s too late): SAFE: land in 9.9 s",
+        "test",
+        {"status": "safe", "safe": True, "verified": True, "late": True, "late_by_s": 2.5, "state_delay_s": 3.5},
+    )
+    section = plan_status_section(late)
+    assert (section["late"], section["late_by_s"], section["state_delay_s"], section["level"]) == (
+        True,
+        2.5,
+        3.5,
+        "caution",
+    )
 
 
 def envelope_points(envelope: Any, warn_margin: float) -> tuple[tuple[float, float], ...]:

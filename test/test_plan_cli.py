@@ -54,3 +54,38 @@ def test_bad_input_is_a_clear_error(arguments, message):
     assert result.returncode == 2
     assert "error" in result.stderr and message in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_any_state_in_a_descent_with_a_slow_rotor_and_the_state_json_round_trip(tmp_path):
+    # 20 ft, 90 kt is safe from level trim; in a 2,000 ft/min descent it is not (exit 1).
+    descent = _helireach("plan", "--height-ft", "20", "--speed-kt", "90", "--climb-rate-fpm", "-2000", "--json")
+    assert descent.returncode == 1, descent.stderr
+    state = json.loads(descent.stdout)["initial_state"]
+    assert state["descent_rate"] == pytest.approx(2000 * 0.3048 / 60)
+    slow = _helireach("plan", "--height-ft", "500", "--speed-kt", "75", "--rotor-speed-pct", "95", "--json")
+    assert slow.returncode == 0, slow.stderr
+    assert json.loads(slow.stdout)["initial_state"]["rotor_speed"] == pytest.approx(0.95 * 27.0)
+    # The initial state (or a whole --json output) fed back gives the same answer.
+    path = tmp_path / "state.json"
+    path.write_text(descent.stdout)
+    again = _helireach("plan", "--state-json", str(path), "--json")
+    assert again.returncode == 1 and json.loads(again.stdout)["value"] == pytest.approx(
+        json.loads(descent.stdout)["value"], abs=1e-9
+    )
+
+
+@pytest.mark.parametrize(
+    ("document", "message"),
+    [
+        ('{"height": 10, "forward_speed": 5, "descent_rate": 1}', "rotor_speed"),
+        ('{"height": 10, "forward_speed": 5, "descent_rate": 1, "rotor_speed": 27, "speed": 3}', "unknown"),
+        ('{"height": "high", "forward_speed": 5, "descent_rate": 1, "rotor_speed": 27}', "finite number"),
+        ("[1, 2]", "JSON object"),
+        ("{not json", "not JSON"),
+    ],
+)
+def test_a_bad_state_file_is_a_clear_error(tmp_path, document, message):
+    path = tmp_path / "state.json"
+    path.write_text(document)
+    result = _helireach("plan", "--state-json", str(path))
+    assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr

@@ -2,7 +2,8 @@
 
 ``helireach bringup [--params-file F ...] [--with-sim] [--scenario S] [--log-dir D] [--no-record] [--display]
 [--executor KIND] [--ros-args ...]`` runs the composed nodes (:mod:`helireach_ros.ros.bringup`) until Ctrl-C
-or SIGTERM.
+or SIGTERM. Exit codes: 0 after Ctrl-C/SIGTERM, 2 for a bad command line, parameter file or parameter value
+(one line on stderr, nothing started).
 """
 
 from __future__ import annotations
@@ -16,6 +17,17 @@ __all__ = ["register"]
 
 
 def _run_bringup(arguments: argparse.Namespace) -> int:
+    from helireach_ros.ros.node_command_line import CommandLineError, check_ros_arguments
+
+    try:  # one line and exit 2 for what rcl would answer with a traceback (trailing -p, broken YAML)
+        files = [argument for path in arguments.params_file for argument in ("--params-file", path)]
+        check_ros_arguments([*files, *arguments.ros_args])
+    except CommandLineError as error:
+        print(f"helireach bringup: error: {error}", file=sys.stderr)
+        return 2
+
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+
     from helireach_ros.ros.bringup import run_bringup
 
     extra = []
@@ -35,7 +47,11 @@ def _run_bringup(arguments: argparse.Namespace) -> int:
             executor=arguments.executor,
         )
     except (FileNotFoundError, ValueError) as error:
-        print(f"helireach bringup: {error}", file=sys.stderr)
+        # ValueError includes ParameterError: a bad parameter value stops the system before it starts
+        print(f"helireach bringup: error: {error}", file=sys.stderr)
+        return 2
+    except rclpy_implementation.UnknownROSArgsError as error:
+        print(f"helireach bringup: error: unknown ROS argument(s) {error}", file=sys.stderr)
         return 2
 
 

@@ -3,12 +3,14 @@
 The page is at ``http://127.0.0.1:8080/`` by default; only an explicit ``--bind`` makes it listen on anything
 but loopback. ``--hold`` keeps the page up after Ctrl-C/SIGTERM stops ROS (last data shown, banner NO DATA,
 marked held) until a second Ctrl-C/SIGTERM. Options left out keep the node's parameter defaults
-(see :class:`helireach_ros.display.node.CockpitDisplay`).
+(see :class:`helireach_ros.display.node.CockpitDisplay`). Exit codes: 0 after Ctrl-C/SIGTERM, 1 the page
+cannot be served (port taken), 2 bad input (``--port`` outside 0-65535, an out-of-range ``--stale-after``).
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from typing import Any
 
 __all__ = ["register", "run"]
@@ -24,7 +26,7 @@ def register(subparsers: Any) -> None:
             "the /helireach/safety_status banner and, after an engine failure, the landing plan."
         ),
     )
-    parser.add_argument("--port", type=int, default=None, help="TCP port (default 8080; 0 = any free port)")
+    parser.add_argument("--port", type=_port, default=None, help="TCP port 0-65535 (default 8080; 0 = any free port)")
     parser.add_argument(
         "--bind", default=None, help="listen address (default 127.0.0.1; e.g. 0.0.0.0 exposes it to the network)"
     )
@@ -38,11 +40,23 @@ def register(subparsers: Any) -> None:
     parser.set_defaults(handler=run)
 
 
+def _port(text: str) -> int:
+    """argparse type of ``--port``: an integer in 0..65535 (the node's ``port`` parameter range)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"{port} is outside 0-65535")
+    return port
+
+
 def run(arguments: argparse.Namespace) -> int:
-    """Handler of ``helireach display``; returns the exit code (1 if the page cannot be served)."""
+    """Handler of ``helireach display``; returns the exit code (1 if the page cannot be served, 2 bad input)."""
     from rclpy.parameter import Parameter
 
     from helireach_ros.display.node import run_display
+    from helireach_ros.ros.parameters import ParameterError
 
     given = {
         "port": arguments.port,
@@ -53,5 +67,8 @@ def run(arguments: argparse.Namespace) -> int:
         "stale_after_s": arguments.stale_after,
     }
     overrides = [Parameter(name, value=value) for name, value in given.items() if value is not None]
-    # args=[]: the helireach command line is not a ROS command line
-    return run_display(args=[], parameter_overrides=overrides, hold=arguments.hold)
+    try:  # args=[]: the helireach command line is not a ROS command line
+        return run_display(args=[], parameter_overrides=overrides, hold=arguments.hold)
+    except ParameterError as error:  # e.g. --stale-after -1: the display must not start on a default instead
+        print(f"helireach display: error: {error}", file=sys.stderr)
+        return 2

@@ -56,7 +56,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     compute.add_argument("--quiet", action="store_true", help="no progress output")
     compute.set_defaults(handler=_compute)
 
-    query = commands.add_parser("query", help="status, value and margin at a height and speed")
+    query = commands.add_parser(
+        "query",
+        help="status, value and margin at a height and speed",
+        description="Exit code 0 only when the point is safe (replay-verified at every enclosing node); 1 when it "
+        "is not safe (unsafe, unverified, failed or outside the grid); 2 for bad input (unreadable or mismatched "
+        "file, non-finite height or speed).",
+    )
     query.add_argument("file", help="envelope .npz")
     query.add_argument("--height-ft", type=float, required=True)
     query.add_argument("--speed-kt", type=float, required=True)
@@ -163,9 +169,14 @@ def _is_partial(path: Path) -> bool:
 
 
 def _query(arguments: argparse.Namespace) -> int:
+    """Exit code 0 safe, 1 not safe (like ``helireach plan``), 2 bad input."""
+    import math
+
     from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
     from helireach_ros.core.units import FT, KT
 
+    if not (math.isfinite(arguments.height_ft) and math.isfinite(arguments.speed_kt)):
+        return _error(f"--height-ft and --speed-kt must be finite, got {arguments.height_ft}, {arguments.speed_kt}")
     try:
         airframe = None
         if arguments.airframe:
@@ -194,7 +205,7 @@ def _query(arguments: argparse.Namespace) -> int:
             f"{arguments.height_ft:g} ft, {arguments.speed_kt:g} kt: {answer.status} (value {answer.value:.3f}, "
             f"margin {answer.margin:.1f} ft/kt) [{envelope.airframe_name}, envelope {envelope.envelope_id}]"
         )
-    return 0
+    return 0 if answer.status == "safe" else 1  # unsafe, unverified, failed and outside are all "not safe"
 
 
 def _plot(arguments: argparse.Namespace) -> int:

@@ -1,4 +1,10 @@
-"""``helireach plan``: one landing plan from level trim at a height and speed, as text, JSON or a figure."""
+"""``helireach plan``: one landing plan from any state, as text, JSON or a figure.
+
+The state at the failure is steady flight trimmed at ``--height-ft``, ``--speed-kt`` and ``--climb-rate-fpm``
+(default level), with the rotor at ``--rotor-speed-pct`` of Ω₀ and ``--power-fraction`` of the power the rotor
+absorbs in that flight left to the engine; or any state given in SI by ``--state-json FILE`` (the
+``initial_state`` object that ``--json`` prints, or a whole ``--json`` output).
+"""
 
 from __future__ import annotations
 
@@ -6,6 +12,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 
 __all__ = ["register", "run_plan"]
 
@@ -14,15 +21,29 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds the ``plan`` subcommand."""
     parser = subparsers.add_parser(
         "plan",
-        help="plan (and verify) a landing after an engine failure from level trim",
-        description="Solve the reachability NLP from level trim at a height and speed, replay the plan through the "
-        "model, and report whether a safe landing is reachable.",
+        help="plan (and verify) a landing after an engine failure from any state",
+        description="Solve the reachability NLP from a state at the failure (steady flight at a height, speed and "
+        "climb rate, or a state file), replay the plan through the model, and report whether a safe landing is "
+        "reachable.",
     )
     parser.add_argument("--airframe", default="uh60a_class", help="airframe name in config/airframes or a YAML path")
-    parser.add_argument("--height-ft", type=float, required=True, help="height above ground at the failure [ft]")
-    parser.add_argument("--speed-kt", type=float, required=True, help="forward speed at the failure [kt]")
+    parser.add_argument("--height-ft", type=float, help="height above ground at the failure [ft]")
+    parser.add_argument("--speed-kt", type=float, help="forward speed at the failure [kt]")
     parser.add_argument(
-        "--power-fraction", type=float, default=0.0, help="engine power left, fraction of trim power (0 = total loss)"
+        "--climb-rate-fpm", type=float, default=0.0, help="climb rate at the failure [ft/min], < 0 descending (0)"
+    )
+    parser.add_argument("--rotor-speed-pct", type=float, default=100.0, help="rotor speed, %% of nominal (100)")
+    parser.add_argument(
+        "--power-fraction",
+        type=float,
+        default=0.0,
+        help="engine power left, fraction of the power the rotor absorbs in that flight (0 = total loss)",
+    )
+    parser.add_argument(
+        "--state-json",
+        metavar="FILE",
+        help="the state at the failure in SI (descent_rate, forward_speed, rotor_speed, height[, distance, "
+        "engine_power]) instead of the flight options; '-' reads standard input",
     )
     parser.add_argument("--method", choices=("verified", "paper"), default=None, help="transcription (default: config)")
     parser.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
@@ -36,23 +57,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run_plan(arguments: argparse.Namespace) -> int:
     """Handler of ``helireach plan``; returns 0 if safe, 1 if not, 2 on bad input."""
     from helireach_ros.core.airframe import ConfigError, load_airframe
-    from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import plan_landing
     from helireach_ros.core.settings import load_settings
     from helireach_ros.core.units import FT, KT, LBF
 
     try:
-        for name in ("height_ft", "speed_kt", "power_fraction"):
-            if not math.isfinite(getattr(arguments, name)):
-                raise ValueError(f"--{name.replace('_', '-')} must be a finite number")
         airframe = load_airframe(arguments.airframe).with_conditions(
             gross_weight=None if arguments.weight_lb is None else arguments.weight_lb * LBF,
             density_altitude=None if arguments.density_altitude_ft is None else arguments.density_altitude_ft * FT,
         )
         settings = load_settings(arguments.settings, method=arguments.method)
-        state = initial_state_after_failure(
-            airframe, arguments.height_ft * FT, arguments.speed_kt * KT, arguments.power_fraction
-        )
+        state = _state(arguments, airframe)
         plan = plan_landing(state, airframe, settings)
     except (ConfigError, ValueError) as error:
         print(f"helireach plan: error: {error}", file=sys.stderr)
@@ -69,9 +84,11 @@ def run_plan(arguments: argparse.Namespace) -> int:
         print(json.dumps(summary))
     else:
         touchdown = plan.replay.touchdown_state
+        rotor_pct = 100 * state.rotor_speed / airframe.nominal_rotor_speed
         print(
-            f"{airframe.name}: {arguments.height_ft:.0f} ft, {arguments.speed_kt:.0f} kt, power "
-            f"{100 * arguments.power_fraction:.0f} % -> {plan.status.upper()} ({plan.method})\n"
+            f"{airframe.name}: {state.height / FT:.0f} ft, {state.forward_speed / KT:.0f} kt, "
+            f"{-state.descent_rate / FT * 60:+.0f} ft/min, rotor {rotor_pct:.0f} %, "
+            f"engine {state.engine_power / 1e3:.0f} kW -> {plan.status.upper()} ({plan.method})\n"
             f"  value {plan.value:+.3f} (<= 0 is safe), replayed value {plan.replay.value:+.3f}\n"
             f"  time to land {plan.time_to_land:.2f} s; replayed touchdown {touchdown[0] / FT:.1f} ft/s, "
             f"{touchdown[1] / KT:.1f} kt, rotor {100 * touchdown[2] / airframe.nominal_rotor_speed:.0f} %\n"
@@ -80,3 +97,38 @@ def run_plan(arguments: argparse.Namespace) -> int:
         if arguments.plot:
             print(f"  figure: {arguments.plot}")
     return 0 if plan.safe else 1
+
+
+def _state(arguments: argparse.Namespace, airframe):
+    """The state at the failure from the options (see the module docstring)."""
+    from helireach_ros.core.model import HelicopterState, initial_state_after_failure
+    from helireach_ros.core.units import FT, KT
+
+    if arguments.state_json is not None:
+        if arguments.height_ft is not None or arguments.speed_kt is not None:
+            raise ValueError("--state-json replaces --height-ft/--speed-kt: give one or the other")
+        try:
+            text = sys.stdin.read() if arguments.state_json == "-" else Path(arguments.state_json).read_text()
+            document = json.loads(text)
+        except OSError as error:
+            raise ValueError(f"--state-json: cannot read {arguments.state_json!r}: {error.strerror}") from error
+        except json.JSONDecodeError as error:
+            raise ValueError(f"--state-json: not JSON ({error})") from error
+        if isinstance(document, dict) and isinstance(document.get("initial_state"), dict):
+            document = document["initial_state"]  # a whole `helireach plan --json` output
+        if not isinstance(document, dict):
+            raise ValueError("--state-json: expected a JSON object of state components")
+        return HelicopterState.from_mapping(document)
+    if arguments.height_ft is None or arguments.speed_kt is None:
+        raise ValueError("give --height-ft and --speed-kt (or --state-json FILE)")
+    for name in ("height_ft", "speed_kt", "climb_rate_fpm", "rotor_speed_pct", "power_fraction"):
+        if not math.isfinite(getattr(arguments, name)):
+            raise ValueError(f"--{name.replace('_', '-')} must be a finite number")
+    return initial_state_after_failure(
+        airframe,
+        arguments.height_ft * FT,
+        arguments.speed_kt * KT,
+        arguments.power_fraction,
+        climb_rate=arguments.climb_rate_fpm * FT / 60.0,
+        rotor_speed=arguments.rotor_speed_pct / 100.0 * airframe.nominal_rotor_speed,
+    )

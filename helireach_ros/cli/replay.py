@@ -1,9 +1,10 @@
 """``helireach replay``: republish a recorded run, or compare its plans with a re-run.
 
-* ``helireach replay LOG.mcap [--rate X] [--topics T ...]`` republishes a log with its original timing
-  and QoS (:func:`helireach_ros.ros.replay.replay_log`). To re-run the nodes against a recorded failure,
-  start ``helireach bringup`` with the monitor's ``max_message_age`` at 0 (the log's stamps are old) and
-  replay only the vehicle topics: ``--topics /vehicle/odometry /vehicle/rotor /vehicle/engine_failure``.
+* ``helireach replay LOG.mcap [--rate X] [--topics T ...] [--start S] [--loop] [--recover]`` republishes a log
+  with its original timing and QoS, and ``/clock`` (:mod:`helireach_ros.ros.replay`: rules, exit codes). To
+  re-run the nodes against a recorded failure, start ``helireach bringup`` with the monitor's
+  ``max_message_age`` at 0 (the log's stamps are old) and replay only the vehicle topics:
+  ``--topics /vehicle/odometry /vehicle/rotor /vehicle/engine_failure``.
 * ``helireach replay LOG.mcap --compare`` publishes nothing: it re-runs the planner on every logged
   failure state (as the planner node did: same airframe and settings, warm-started from the envelope)
   and reports the difference to the logged plan (:mod:`helireach_ros.ros.plan_comparison`); exit code 0
@@ -22,12 +23,9 @@ __all__ = ["register"]
 def _run_replay(arguments: argparse.Namespace) -> int:
     if arguments.compare:
         return _run_compare(arguments)
-    from helireach_ros.ros.replay import main as replay_main
+    from helireach_ros.ros.replay import run_replay
 
-    argv = [arguments.log, "--rate", repr(arguments.rate)]
-    if arguments.topics:
-        argv += ["--topics", *arguments.topics]
-    return replay_main(argv)
+    return run_replay(arguments)
 
 
 def _run_compare(arguments: argparse.Namespace) -> int:
@@ -58,14 +56,14 @@ def _run_compare(arguments: argparse.Namespace) -> int:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Adds ``replay`` to the ``helireach`` command."""
+    from helireach_ros.ros.replay import add_playback_arguments  # imports no rclpy
+
     replay = subparsers.add_parser(
         "replay",
         help="republish an MCAP log, or compare its plans with a re-run",
         description="Republishes a helireach MCAP log with its original timing and QoS; with --compare, re-runs the "
         "planner on each logged failure state and reports the difference to the logged plan instead.",
     )
-    replay.add_argument("log", help="the .mcap file")
-    replay.add_argument("--rate", type=float, default=1.0, help="playback speed factor (0 = as fast as possible)")
-    replay.add_argument("--topics", nargs="+", metavar="TOPIC", help="only these topics")
+    add_playback_arguments(replay)
     replay.add_argument("--compare", action="store_true", help="re-run the planner on the logged failure states")
     replay.set_defaults(handler=_run_replay)

@@ -17,6 +17,7 @@ from typing import Any
 
 import yaml
 
+from helireach_ros.core.airframe_plausibility import warn_if_implausible
 from helireach_ros.core.resources import config_path
 from helireach_ros.core.units import UnitError, convert_to_si
 
@@ -271,6 +272,10 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
 def load_airframe(name_or_path: str | Path) -> Airframe:
     """Loads an airframe by name (``config/airframes/<name>.yaml``) or from a YAML file path.
 
+    Derived rotor figures outside the broad range of helicopters (tip speed, disk loading, solidity, blade
+    and power loading: :mod:`~helireach_ros.core.airframe_plausibility`) give an
+    ``AirframePlausibilityWarning`` naming the figure, its value and range; the airframe still loads.
+
     Raises:
         ConfigError: the file is missing, unreadable, or invalid (the message names the key).
     """
@@ -284,4 +289,7 @@ def load_airframe(name_or_path: str | Path) -> Airframe:
         document = yaml.safe_load(text)
     except yaml.YAMLError as error:
         raise ConfigError(f"{path}: not valid YAML: {error}") from None
-    return parse_airframe(document, where=f"{path}: ")
+    airframe = parse_airframe(document, where=f"{path}: ")
+    # a plausible wrong unit (rotor radius in m instead of ft) passes the physical ranges: warn, never refuse
+    warn_if_implausible(airframe, where=f"{path}: ")
+    return airframe

@@ -25,8 +25,11 @@ Deviations from the paper, on purpose:
 
 from __future__ import annotations
 
+import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -84,6 +87,28 @@ class HelicopterState:
         return np.array(
             [self.descent_rate, self.forward_speed, self.rotor_speed, self.height, self.distance, self.engine_power]
         )
+
+    @classmethod
+    def from_mapping(cls, values: Mapping[str, Any]) -> HelicopterState:
+        """A state from ``{name: value}`` in SI with the names of :data:`STATE_NAMES` (what ``plan --json`` prints
+        as ``initial_state``); ``distance`` and ``engine_power`` may be left out (0).
+
+        Raises:
+            ValueError: an unknown or missing name, or a value that is not a finite number.
+        """
+        unknown = sorted(set(values) - set(STATE_NAMES))
+        if unknown:
+            raise ValueError(f"unknown state component(s) {unknown}; expected {list(STATE_NAMES)}")
+        missing = [name for name in STATE_NAMES[:4] if name not in values]
+        if missing:
+            raise ValueError(f"state component(s) {missing} missing")
+        components = []
+        for name in STATE_NAMES:
+            value = values.get(name, 0.0)
+            if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+                raise ValueError(f"state component {name!r} must be a finite number, got {value!r}")
+            components.append(float(value))
+        return cls(*components)
 
     @classmethod
     def from_array(cls, values) -> HelicopterState:

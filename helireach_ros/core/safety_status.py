@@ -204,7 +204,8 @@ def decide_safety_status(
     elif episode == "landed":
         level, text, source = "STALE", "LANDED: the envelope does not apply on the ground", "none"
     elif state_problem:
-        level, text, source = "STALE", f"NO DATA: {state_problem}", "none"
+        missing = f"; no envelope ({envelope_note})" if envelope is None and envelope_note else ""
+        level, text, source = "STALE", f"NO DATA: {state_problem}{missing}", "none"
     else:
         level, text, source = _before_failure(
             _where(height, forward_speed), envelope, envelope_note, live, warn_margin, live_warn_value, values

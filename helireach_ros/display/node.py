@@ -19,7 +19,7 @@ Wire format (JSON text frames, SI units; the page converts to ft/kt for people):
     {"config": {...},      # on connect and on change: units, stale_after_s, rotor limits, airframe
      "envelope": {...},    # on connect and on change: H-V grid, status codes, boundary, or an error
      "plan": {...} | null, # on change: trajectory, predicted path, plan status
-     "live": {...}}        # every frame: status banner, state, rotor, failure, time to touchdown
+     "live": {...}}        # every frame: status banner, state, rotor, failure, episode, time to touchdown
 
 Run: ``helireach display`` or ``python -m helireach_ros.display.node --ros-args -p port:=8080``.
 """
@@ -50,6 +50,7 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros.core.units import FT, KT
 from helireach_ros.display.sections import (
     envelope_section,
+    episode_section,
     finite,
     path_section,
     plan_status_section,
@@ -61,6 +62,7 @@ from helireach_ros.display.sections import (
 from helireach_ros.display.server import DisplayServerError, PageServer
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.parameters import declare_checked_parameter
+from helireach_ros.ros.qos import QosWatch
 
 __all__ = [
     "DEFAULT_BIND",
@@ -102,6 +104,7 @@ class _Latest:
     trajectory: _Received | None = None
     path: _Received | None = None
     plan_status: _Received | None = None
+    episode: _Received | None = None
     plan_reference: float | None = None  # monotonic time of the plan's t = 0
     held: bool = False
     versions: dict[str, int] = field(default_factory=lambda: {"config": 1, "envelope": 1, "plan": 1})
@@ -150,7 +153,9 @@ class CockpitDisplay(Node):
         self._plan_json = "null"
 
         # QoS as documented in msg_docs (ros/messages.py): the safety status and the plan are latched, so a page opened
-        # after the failure shows the plan; sensor streams with BEST_EFFORT, which matches any publisher
+        # after the failure shows the plan; sensor streams with BEST_EFFORT, which matches any publisher. An
+        # incompatible publisher (a volatile status, a best-effort plan) is logged as an ERROR (the page shows NO DATA)
+        qos_watch = QosWatch(self, publish=False)
         for message_type, topic, callback, qos in (
             (DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, self._on_safety_status, rm.LATCHED_QOS),
             (Odometry, state_topic, self._on_state, rm.SENSOR_QOS),
@@ -159,8 +164,9 @@ class CockpitDisplay(Node):
             (JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, self._on_trajectory, rm.LATCHED_QOS),
             (PathMsg, rm.TOPIC_LANDING_PATH, self._on_path, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan_status, rm.LATCHED_QOS),
+            (DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.EVENT_QOS),
         ):
-            self.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
+            qos_watch.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
 
         if self._bind not in ("127.0.0.1", "::1", "localhost"):
             self.get_logger().warning(f"display listens on {self._bind}, not loopback: reachable from the network")
@@ -334,6 +340,14 @@ class CockpitDisplay(Node):
 
         self._store(update)
 
+    def _on_episode(self, message: DiagnosticStatus) -> None:
+        content = episode_section(message)
+
+        def update(latest: _Latest, now: float) -> None:
+            latest.episode = _Received(content, now)
+
+        self._store(update)
+
     def _on_path(self, message: PathMsg) -> None:
         self._store_plan_part("path", path_section(message))
 
@@ -402,6 +416,7 @@ class CockpitDisplay(Node):
             "state": None,
             "rotor": None,
             "failure": None,
+            "episode": None,
             "plan_clock": None,
             "held": latest.held,
         }
@@ -419,6 +434,8 @@ class CockpitDisplay(Node):
             }
         if latest.failure is not None:
             live["failure"] = {"age_s": age(latest.failure)}
+        if latest.episode is not None:
+            live["episode"] = {**latest.episode.content, "stale": age(latest.episode) > stale_after}
         if latest.trajectory is not None and latest.plan_reference is not None:
             live["plan_clock"] = self._plan_clock(latest, now)
         return live

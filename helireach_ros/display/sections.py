@@ -17,6 +17,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Path as PathMsg
 from trajectory_msgs.msg import JointTrajectory
 
+from helireach_ros.core.failure_episode import EpisodeState
 from helireach_ros.ros import messages as rm
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     "banner_level",
     "boundary_segments",
     "envelope_section",
+    "episode_section",
     "finite",
     "path_section",
     "plan_status_section",
@@ -293,9 +295,33 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
         "time_to_land_s": finite(_lookup(values, _PLAN_TIME_TO_LAND_KEYS)),
         "solve_time_ms": finite(_lookup(values, _PLAN_SOLVE_TIME_KEYS)),
         "replan_index": finite(values.get("replan_index")),
+        "status": values.get("status"),
+        "late": _parse_bool(values.get("late")),
+        "late_by_s": finite(values.get("late_by_s")),
+        "state_delay_s": finite(values.get("state_delay_s")),
         "touchdown_descent_rate_ms": finite(values.get("predicted_touchdown_descent_rate_m_s")),
         "touchdown_forward_speed_ms": finite(values.get("predicted_touchdown_forward_speed_m_s")),
         "values": values,
+    }
+
+
+def episode_section(message: DiagnosticStatus) -> dict[str, Any]:
+    """The failure episode from ``/helireach/failure_episode`` (the monitor's episode model, ``msg_docs/``).
+
+    Returns:
+        ``{"phase", "episode_id", "flag_changes", "level", "message"}``; an unreadable one is phase ``unknown``
+        with the ``error`` (the page then shows it, never a guessed phase).
+    """
+    try:
+        state = EpisodeState.from_values(rm.status_values(message))
+    except ValueError as error:
+        return {"phase": "unknown", "episode_id": None, "flag_changes": None, "level": "nodata", "error": str(error)}
+    return {
+        "phase": state.phase.value,
+        "episode_id": state.episode_id,
+        "flag_changes": state.flag_changes,
+        "level": banner_level(message.level),
+        "message": str(message.message),
     }
 
 

@@ -2,11 +2,12 @@
 
 There is no ``ros2 launch`` with the PyPI wheels; this is the ros2/examples ``composed.py`` pattern.
 :func:`build_system` initialises a context with ``config/nodes.yaml`` (then the user's parameter
-files, which win), creates the monitor, envelope status and planner nodes, optionally the simulated
-vehicle and any extra nodes (e.g. the cockpit display), and last the MCAP recorder, whose metadata
-names the airframe, envelope, software version and scenario. One single-threaded executor spins
-them all by default (:mod:`helireach_ros.ros.executors`); the planner solves on its own thread, so no
-callback blocks the others.
+files, which win), creates the MCAP recorder first, then the monitor, envelope status and planner
+nodes, optionally the simulated vehicle and any extra nodes (e.g. the cockpit display), and waits (at
+most 2 s) until the recorder has matched every publisher, so the log starts with the vehicle's first
+message; the recorder's metadata names the airframe, envelope, software version and scenario. One
+single-threaded executor spins them all by default (:mod:`helireach_ros.ros.executors`); the planner
+solves on its own thread, so no callback blocks the others.
 
 ``helireach bringup [--params-file F] [--with-sim] [--executor KIND]`` (:func:`run_bringup`) spins
 until Ctrl-C or SIGTERM and then finishes the log. Each node also has its own console script for
@@ -16,7 +17,6 @@ multi-process use.
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import json
 import math
 import os
@@ -35,6 +35,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from helireach_ros import __version__
+from helireach_ros.core.mcap_log.run_metadata import aircraft_metadata
 from helireach_ros.core.resources import config_path
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, create_executor
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
@@ -42,6 +43,7 @@ from helireach_ros.ros.nodes.monitor import VehicleMonitor
 from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 from helireach_ros.ros.nodes.recorder import McapRecorder
 from helireach_ros.ros.nodes.sim_vehicle import SimVehicleNode
+from helireach_ros.ros.parameters import warn_unknown_parameters_of_system
 
 __all__ = [
     "DEFAULT_EXECUTOR",
@@ -55,6 +57,7 @@ __all__ = [
 DEFAULT_PARAMETERS = "nodes.yaml"
 """The node parameter file in ``config/``, loaded before the user's."""
 _DRAIN_S = 0.3  # after a stop signal: run the callbacks already queued before finishing the log
+_RECORDER_MATCH_TIMEOUT_S = 2.0  # bound on waiting for the recorder's subscriptions to match (in-process: ms)
 
 
 def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args: Sequence[str] = ()) -> list[str]:
@@ -177,12 +180,7 @@ def _recorder_metadata(system_nodes: Mapping[str, Node | None], command: str) ->
         "planner_settings": "",
     }
     if getattr(planner, "planner", None) is not None:  # configured: the model and settings it plans with
-        metadata.update(
-            airframe_digest=planner.airframe.digest(),
-            gross_weight_n=repr(planner.airframe.gross_weight),
-            density_altitude_m=repr(planner.airframe.density_altitude),
-            planner_settings=json.dumps(dataclasses.asdict(planner.settings), sort_keys=True),
-        )
+        metadata.update(aircraft_metadata(planner.airframe, planner.settings))
     if sim is not None:
         metadata["scenario"] = sim.scenario.name
         metadata["scenario_json"] = json.dumps(sim.scenario.as_dict(), sort_keys=True)
@@ -223,6 +221,11 @@ def build_system(
     )
     created: list[Node] = []
     try:
+        recorder = None
+        if record:  # first, so that it can subscribe to each publisher as it appears
+            overrides = [Parameter("log_dir", value=str(log_dir))] if log_dir is not None else []
+            recorder = McapRecorder(metadata={"command": command}, context=context, parameter_overrides=overrides)
+            created.append(recorder)
         monitor = VehicleMonitor(context=context)
         created.append(monitor)
         envelope_status = EnvelopeStatusNode(context=context)
@@ -238,12 +241,12 @@ def build_system(
         for factory in extra_nodes:
             extra.append(factory(context=context))
             created.append(extra[-1])
-        recorder = None
-        if record:
-            metadata = _recorder_metadata({"planner": planner, "envelope_status": envelope_status, "sim": sim}, command)
-            overrides = [Parameter("log_dir", value=str(log_dir))] if log_dir is not None else []
-            recorder = McapRecorder(metadata=metadata, context=context, parameter_overrides=overrides)
-            created.append(recorder)
+        if recorder is not None:
+            recorder.update_metadata(
+                _recorder_metadata({"planner": planner, "envelope_status": envelope_status, "sim": sim}, command)
+            )
+            # Nothing spins yet: every message the vehicle publishes from the first on is recorded.
+            recorder.wait_until_recording(_RECORDER_MATCH_TIMEOUT_S)
         spinner = create_executor(executor, context)
     except BaseException:
         for node in reversed(created):
@@ -253,6 +256,7 @@ def build_system(
     system = HelireachSystem(context, spinner, monitor, envelope_status, planner, sim, recorder, extra)
     for node in system.nodes:
         spinner.add_node(node)
+    warn_unknown_parameters_of_system(system.nodes)  # a misspelt -p is otherwise silently ignored
     return system
 
 

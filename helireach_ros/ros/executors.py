@@ -15,7 +15,8 @@ up to 1.8 s late, and with the planner's solver thread the failure-latency bench
 within 10 s (README, "Failure to trajectory").
 
 rclpy is imported on first use, so command-line parsers can offer the kinds cheaply. :func:`run_node` is the
-body of every node's ``main`` (ros2/demos style).
+body of every node's ``main`` (ros2/demos style: ``sys.exit(run_node(NodeClass, args))``); it also answers
+``--help`` and turns a bad command line or parameter into one line on stderr and exit code 2.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ["DEFAULT_EXECUTOR", "EXECUTOR_KINDS", "create_executor", "run_node"]
+__all__ = ["DEFAULT_EXECUTOR", "EXECUTOR_KINDS", "create_executor", "node_command_line", "run_node"]
 
 EXECUTOR_KINDS = ("single_threaded", "events")
 """The executor kinds :func:`create_executor` accepts."""
@@ -58,30 +59,99 @@ def create_executor(kind: str, context: Any = None) -> Any:
     raise ValueError(f"unknown executor kind {kind!r}; expected one of {', '.join(EXECUTOR_KINDS)}")
 
 
-def run_node(node_class: Callable[[], Node], args: list[str] | None = None) -> None:
+def _one_line(error: BaseException) -> str:
+    """rcl's messages end in ``, at /project/src/...`` source locations: keep the reason only."""
+    return str(error).split(", at /")[0].replace("failed to initialize rcl: ", "").strip()
+
+
+def node_command_line(node_class: type, args: list[str] | None = None) -> tuple[list[str], str, int | None]:
+    """What a node script does before ``rclpy.init``: answer ``--help``, refuse a bad command line.
+
+    Args:
+        node_class: the node the script runs (its name and parameters make the usage text).
+        args: command-line arguments, program name first (default ``sys.argv``).
+
+    Returns:
+        ``(arguments, script name, exit code)``; the exit code is None when the node should start, 0 after
+        printing the usage, 2 after printing a one-line error on stderr.
+    """
+    import sys
+    from pathlib import Path
+
+    from helireach_ros.ros.node_command_line import (
+        CommandLineError,
+        check_node_arguments,
+        node_name_of,
+        node_usage,
+        wants_help,
+    )
+
+    arguments = list(sys.argv if args is None else args)
+    node_name = node_name_of(node_class)
+    script = Path(arguments[0]).name if arguments else node_name
+    if wants_help(arguments):
+        print(node_usage(script, node_name, node_class))
+        return arguments, script, 0
+    try:
+        check_node_arguments(arguments)
+    except CommandLineError as error:
+        print(f"{script}: error: {error}", file=sys.stderr)
+        return arguments, script, 2
+    return arguments, script, None
+
+
+def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> int:
     """The body of a node's ``main``: init, spin until Ctrl-C or SIGTERM, destroy, shut down (ros2/demos style).
+
+    ``-h``/``--help`` prints the node's usage (:func:`~helireach_ros.ros.node_command_line.node_usage`) without
+    starting rclpy. A bad command line (a trailing ``-p``, a missing or broken ``--params-file``, an argument
+    outside ``--ros-args``) or a bad parameter value
+    (:class:`~helireach_ros.ros.parameters.ParameterError`) prints one line on stderr and returns 2 before
+    anything is published. Overrides the node did not declare are warned about once it has declared its
+    parameters (:func:`~helireach_ros.ros.parameters.warn_unknown_parameters`).
 
     Args:
         node_class: builds the node (called after ``rclpy.init``).
-        args: command-line arguments (default ``sys.argv``).
+        args: command-line arguments, program name first (default ``sys.argv``).
+
+    Returns:
+        The exit code for ``sys.exit``: 0 after a normal stop (or ``--help``), 2 for a bad command line or
+        parameter.
     """
+    import sys
+
+    arguments, script, early_exit = node_command_line(node_class, args)
+    if early_exit is not None:
+        return early_exit
+
     import rclpy
     from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
+    from helireach_ros.ros.parameters import ParameterError, warn_unknown_parameters
+
     # rclpy's own SIGINT and SIGTERM handlers wake the blocked executor and make spin() raise, so the
     # node is destroyed (the recorder finishes its log); a Python signal.signal() handler would only
     # run after the wait returned.
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
+    try:
+        rclpy.init(args=arguments, signal_handler_options=SignalHandlerOptions.ALL)
+    except RuntimeError as error:  # rcl's RCLError / UnknownROSArgsError: what the checks above do not cover
+        print(f"{script}: error: bad ROS arguments: {_one_line(error)} (see --help)", file=sys.stderr)
+        return 2
     node = None
     try:
         node = node_class()
+        warn_unknown_parameters(node)
         executor = create_executor(DEFAULT_EXECUTOR)
         executor.add_node(node)
         executor.spin()
+    except ParameterError as error:
+        print(f"{script}: error: {error}", file=sys.stderr)
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+    return 0

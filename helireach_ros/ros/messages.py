@@ -56,8 +56,10 @@ __all__ = [
     "TOPICS",
     "TOPIC_DIAGNOSTICS",
     "TOPIC_ENGINE_FAILURE",
+    "TOPIC_FAILURE_EPISODE",
     "TOPIC_FAILURE_EVENT",
     "TOPIC_LANDING_PATH",
+    "TOPIC_LIVE_REACHABILITY",
     "TOPIC_LANDING_TRAJECTORY",
     "TOPIC_ODOMETRY",
     "TOPIC_PLAN_STATUS",
@@ -99,7 +101,9 @@ TOPIC_ENGINE_FAILURE = "/vehicle/engine_failure"
 TOPIC_STATE = "/helireach/state"
 TOPIC_ROTOR_STATE = "/helireach/rotor_state"
 TOPIC_FAILURE_EVENT = "/helireach/failure_event"
+TOPIC_FAILURE_EPISODE = "/helireach/failure_episode"
 TOPIC_SAFETY_STATUS = "/helireach/safety_status"
+TOPIC_LIVE_REACHABILITY = "/helireach/live_reachability"
 TOPIC_LANDING_TRAJECTORY = "/helireach/landing_trajectory"
 TOPIC_LANDING_PATH = "/helireach/landing_path"
 TOPIC_PLAN_STATUS = "/helireach/plan_status"
@@ -128,20 +132,22 @@ STREAM_QOS = QoSProfile(
 )
 """Streams the helireach nodes and the simulated vehicle publish (state, rotor, diagnostics)."""
 EVENT_QOS = STREAM_QOS
-"""Events that must not be lost: the engine-failure flag and the failure event (reliable)."""
+"""Events that must not be lost, published reliably: the engine-failure flag (sim) and the failure event (which
+the planner and the display also *subscribe* reliably: a best-effort publisher of it is an incompatible-QoS ERROR)."""
 SENSOR_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=10,
     reliability=ReliabilityPolicy.BEST_EFFORT,
     durability=DurabilityPolicy.VOLATILE,
 )
-"""What the nodes *subscribe* to sensor streams with: matches reliable and best-effort publishers."""
+"""What the nodes *subscribe* their inputs with (the vehicle's three topics, the canonical state, /diagnostics):
+matches reliable and best-effort, volatile and transient-local publishers alike (``ros/qos.py`` says why)."""
 
 
 # rclpy gives every publisher and subscription a QoS-event handler by default (it logs incompatible QoS); each
 # one is a waitable the executor re-adds to its wait set on every wait, which in a composed process with a
-# 25 Hz vehicle doubled the CPU time of the demo. The helireach nodes do without: a QoS mismatch shows as
-# silence (STALE), and the documented QoS is checked by the topic-contract test.
+# 25 Hz vehicle doubled the CPU time of the demo. The helireach nodes register only the incompatible-QoS
+# callback, on their inputs and own outputs (helireach_ros.ros.qos.QosWatch); other endpoints use these.
 NO_QOS_EVENTS_PUBLISHER = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
 """``create_publisher`` keyword arguments: no QoS-event handler."""
 NO_QOS_EVENTS_SUBSCRIPTION = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
@@ -167,8 +173,12 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(TOPIC_STATE, "nav_msgs/msg/Odometry", STREAM_QOS, "helireach_monitor"),
         TopicSpec(TOPIC_ROTOR_STATE, "sensor_msgs/msg/JointState", STREAM_QOS, "helireach_monitor"),
         TopicSpec(TOPIC_FAILURE_EVENT, "std_msgs/msg/Header", EVENT_QOS, "helireach_monitor"),
+        TopicSpec(TOPIC_FAILURE_EPISODE, "diagnostic_msgs/msg/DiagnosticStatus", STREAM_QOS, "helireach_monitor"),
         TopicSpec(
             TOPIC_SAFETY_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_envelope_status"
+        ),
+        TopicSpec(
+            TOPIC_LIVE_REACHABILITY, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"
         ),
         TopicSpec(TOPIC_LANDING_TRAJECTORY, "trajectory_msgs/msg/JointTrajectory", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_PATH, "nav_msgs/msg/Path", LATCHED_QOS, "helireach_planner"),

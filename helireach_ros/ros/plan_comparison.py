@@ -113,7 +113,10 @@ def compare_logged_plans(
         raise ValueError(f"{path}: no converged landing plan in the log")
     recorded = metadata.get("helireach", {})
     if "planner_settings" not in recorded or "airframe" not in recorded:
-        raise ValueError(f"{path}: the log's metadata names no airframe/planner settings (not a bringup log?)")
+        raise ValueError(
+            f"{path}: the log's metadata names no airframe/planner settings (the recorder could not load them: "
+            "see its log; or an older recorder)"
+        )
     airframe = load_airframe(recorded["airframe"])
     if recorded.get("gross_weight_n") and recorded.get("density_altitude_m"):  # the planner node's conditions
         airframe = airframe.with_conditions(float(recorded["gross_weight_n"]), float(recorded["density_altitude_m"]))

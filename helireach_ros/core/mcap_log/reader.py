@@ -24,6 +24,7 @@ from helireach_ros.core.mcap_log.records import (
 
 __all__ = ["read_log", "read_log_metadata", "read_log_topics"]
 
+
 def _has_footer(stream: BinaryIO) -> bool:
     """Whether the file ends like a finished MCAP file (footer + closing magic)."""
     stream.seek(0, os.SEEK_END)

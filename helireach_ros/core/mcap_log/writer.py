@@ -6,14 +6,24 @@ once, after an 80-character ``=`` line and ``MSG: pkg/Type``) and a channel (mes
 ``cdr``, metadata ``offered_qos_profiles`` and ``topic_type_hash``). Messages are the rmw CDR bytes
 exactly as received. Like rosbag2 the writer also stores a ``rosbag2`` metadata record holding the
 bag metadata (version 9): without it ``ros2 bag play`` parses ``offered_qos_profiles`` with the
-pre-Jazzy integer enums and rejects the file.
+pre-Jazzy integer enums and rejects the file. As ``rosbag2_storage_mcap`` does (its
+``update_metadata`` runs once, when the bag is closed), that record is written exactly once, at
+:meth:`McapLogWriter.close`, with the final duration and counts. A file that was never closed is still
+identifiable: its header says profile ``ros2`` and the ``helireach`` record (airframe, envelope,
+version...) is written at open; :func:`~helireach_ros.core.mcap_log.recover.recover_log` adds the
+``rosbag2`` record when it rewrites such a file.
 
 Crash safety: data is chunked, and everything the MCAP writer emits (a completed chunk and its
-message index) is handed to the operating system immediately. A recorder killed with SIGKILL leaves
-a file without summary/footer whose completed chunks :func:`read_log` recovers with
-``allow_truncated=True``. ``mcap.reader.make_reader(...).iter_messages()`` raises ``McapError`` on
-such a file (its seeking reader starts from the footer); ``mcap.reader.NonSeekingReader`` reads it
-up to the incomplete tail.
+message index) is handed to the operating system immediately. A chunk is completed when it reaches
+``chunk_size`` bytes or, at the next write or :meth:`McapLogWriter.flush_stale` call, once its oldest
+message has waited ``max_chunk_age`` seconds (monotonic time), so a SIGKILL loses only the messages of
+the open chunk: those received during the last ``max_chunk_age`` plus the caller's
+:meth:`~McapLogWriter.flush_stale` period (the recorder: 0.5 s + 0.25 s, under the 1 s bound).
+A recorder killed with SIGKILL leaves a file without summary/footer whose completed chunks
+:func:`read_log` recovers with ``allow_truncated=True`` and ``recover_log`` rewrites into a finished,
+indexed file. ``mcap.reader.make_reader(...).iter_messages()`` raises ``McapError`` on the killed
+file (its seeking reader starts from the footer); ``mcap.reader.NonSeekingReader`` reads it up to the
+incomplete tail.
 
 This module must not import rclpy: it is used by offline tools and tests.
 """
@@ -22,6 +32,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +55,7 @@ __all__ = ["McapLogWriter"]
 
 _COMPRESSION = {"none": CompressionType.NONE, "lz4": CompressionType.LZ4, "zstd": CompressionType.ZSTD}
 
+
 @dataclass
 class _Topic:
     channel_id: int
@@ -64,6 +76,8 @@ class McapLogWriter:
         metadata: Key/value pairs stored as a ``helireach`` metadata record and as rosbag2's
             ``custom_data``.
         chunk_size: Uncompressed bytes after which a chunk is completed and written out.
+        max_chunk_age: Seconds (monotonic) after which the open chunk is completed at the next
+            :meth:`write` or :meth:`flush_stale`, which bounds what a hard kill loses; ``None`` = size only.
         compression: Chunk compression: ``"none"`` (rosbag2's default), ``"lz4"`` or ``"zstd"``
             (both ship as dependencies of the ``mcap`` wheel).
     """
@@ -74,11 +88,18 @@ class McapLogWriter:
         metadata: Mapping[str, str] | None = None,
         chunk_size: int = 64 * 1024,
         compression: str = "none",
+        max_chunk_age: float | None = 0.5,
     ) -> None:
         if compression not in _COMPRESSION:
             raise ValueError(f"compression must be one of {sorted(_COMPRESSION)}, not {compression!r}")
         if chunk_size < 1:
             raise ValueError(f"chunk_size must be positive, not {chunk_size}")
+        if max_chunk_age is not None and not (max_chunk_age > 0.0 and max_chunk_age < float("inf")):
+            raise ValueError(f"max_chunk_age must be a positive number of seconds or None, not {max_chunk_age!r}")
+        if max_chunk_age is not None and not hasattr(Writer, "flush"):
+            raise ValueError("max_chunk_age needs mcap >= 1.3 (Writer.flush); this mcap cannot bound the loss")
+        self._max_chunk_age = max_chunk_age
+        self._chunk_opened_at: float | None = None  # monotonic time of the open chunk's first message
         self._path = Path(path)
         self._lock = threading.Lock()
         self._topics: dict[str, _Topic] = {}
@@ -95,8 +116,8 @@ class McapLogWriter:
         try:
             self._writer = Writer(self._file, chunk_size=chunk_size, compression=_COMPRESSION[compression])
             self._writer.start(profile="ros2", library=f"helireach_ros.core.mcap_log; {LIBRARY_IDENTIFIER}")
-            # rosbag2 writes its metadata at open too, so a killed recording still identifies itself.
-            self._write_rosbag2_metadata()
+            # The rosbag2 record waits for close() (exactly one, with the final counts); the helireach
+            # record goes first so that a killed recording still identifies itself.
             if self._custom:
                 self._writer.add_metadata("helireach", dict(self._custom))
             self._sync()
@@ -130,13 +151,29 @@ class McapLogWriter:
     ) -> None:
         self.close()
 
-    def add_topic(self, topic: str, type_name: str, qos: QosDescription) -> int:
+    @property
+    def metadata(self) -> dict[str, str]:
+        """The current ``helireach`` metadata (a copy)."""
+        with self._lock:
+            return dict(self._custom)
+
+    def add_topic(
+        self,
+        topic: str,
+        type_name: str,
+        qos: QosDescription,
+        definition: tuple[str, bytes] | None = None,
+        type_hash: str | None = None,
+    ) -> int:
         """Register a topic (schema + channel); idempotent for the same type.
 
         Args:
             topic: Fully qualified topic name.
             type_name: ``pkg/msg/Type``.
             qos: The QoS the publisher offers (stored as ``offered_qos_profiles``).
+            definition: ``(schema encoding, schema data)`` to store instead of the installed definition
+                (recovery copies a log's own schemas).
+            type_hash: ``RIHS01_...`` to store instead of the installed type's hash.
 
         Returns:
             The MCAP channel id.
@@ -156,10 +193,13 @@ class McapLogWriter:
                 return existing.channel_id
             schema_id = self._schemas.get(type_name)
             if schema_id is None:
-                encoding, text = message_definition(type_name)
-                schema_id = self._writer.register_schema(type_name, encoding, text.encode("utf-8"))
+                if definition is None:
+                    encoding, text = message_definition(type_name)
+                    definition = (encoding, text.encode("utf-8"))
+                schema_id = self._writer.register_schema(type_name, definition[0], definition[1])
                 self._schemas[type_name] = schema_id
-            type_hash = type_description_hash(type_name)
+            if type_hash is None:
+                type_hash = type_description_hash(type_name)
             channel_id = self._writer.register_channel(
                 topic,
                 "cdr",
@@ -188,13 +228,56 @@ class McapLogWriter:
             entry = self._topics.get(topic)
             if entry is None:
                 raise McapLogError(f"topic {topic} was not added with add_topic()", self._path)
+            position = self._file.tell()
             self._writer.add_message(entry.channel_id, log_time_ns, bytes(cdr), publish)
             entry.message_count += 1
             self._message_count += 1
             self._start_ns = log_time_ns if self._start_ns is None else min(self._start_ns, log_time_ns)
             self._end_ns = max(self._end_ns, log_time_ns)
+            now = time.monotonic()
+            if self._file.tell() != position:  # the size limit completed the chunk, this message included
+                self._chunk_opened_at = None
+            elif self._chunk_opened_at is None:
+                self._chunk_opened_at = now
+            elif self._chunk_is_stale(now):
+                self._complete_chunk()
             # Nothing reaches the file object until a chunk completes; pass that on at once.
             self._sync()
+
+    def flush_stale(self) -> bool:
+        """Complete the open chunk if its oldest message has waited ``max_chunk_age``; call periodically.
+
+        Returns:
+            Whether a chunk was completed.
+        """
+        with self._lock:
+            if self._closed or not self._chunk_is_stale(time.monotonic()):
+                return False
+            self._complete_chunk()
+            self._sync()
+            return True
+
+    def update_metadata(self, data: Mapping[str, str]) -> bool:
+        """Merge values into the ``helireach`` metadata; a change writes the whole record again.
+
+        Readers take the last ``helireach`` record (each is complete), so a killed file holds what was
+        known when it was killed; the ``rosbag2`` record's ``custom_data`` (at close) holds the final values.
+
+        Returns:
+            Whether anything changed.
+
+        Raises:
+            McapLogError: The writer is closed.
+        """
+        with self._lock:
+            self._check_open()
+            merged = {**self._custom, **{str(k): str(v) for k, v in data.items()}}
+            if merged == self._custom:
+                return False
+            self._custom = merged
+            self._writer.add_metadata("helireach", dict(merged))
+            self._sync()
+            return True
 
     def add_metadata(self, name: str, data: Mapping[str, str]) -> None:
         """Write an MCAP metadata record (e.g. ``helireach``: airframe, envelope, version, scenario).
@@ -215,9 +298,7 @@ class McapLogWriter:
         with self._lock:
             if self._closed:
                 return
-            writer_flush = getattr(self._writer, "flush", None)  # mcap >= 1.3
-            if writer_flush is not None:
-                writer_flush()
+            self._complete_chunk()
             self._sync()
 
     def close(self) -> None:
@@ -239,6 +320,16 @@ class McapLogWriter:
 
     def _sync(self) -> None:
         self._file.flush()
+
+    def _chunk_is_stale(self, now: float) -> bool:
+        opened = self._chunk_opened_at
+        return self._max_chunk_age is not None and opened is not None and now - opened >= self._max_chunk_age
+
+    def _complete_chunk(self) -> None:
+        writer_flush = getattr(self._writer, "flush", None)  # mcap >= 1.3
+        if writer_flush is not None:
+            writer_flush()
+        self._chunk_opened_at = None
 
     def _write_rosbag2_metadata(self) -> None:
         start = self._start_ns if self._start_ns is not None else INT64_MAX

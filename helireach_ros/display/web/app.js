@@ -207,6 +207,7 @@
   function planState() {
     const plan = model.plan;
     if (!plan) return "none";
+    if (plan.status && plan.status.status === "ended") return "ended"; // engine recovered: the plan is void
     if (!plan.trajectory) return "planning";
     if (plan.trajectory.error) return "error";
     return "shown";
@@ -222,10 +223,14 @@
     if (state === "none") $("plan-idle").textContent = "ENGINE NORMAL \u00b7 NO PLAN";
     if (state === "planning") $("plan-idle").textContent = "ENGINE FAILURE \u00b7 PLANNING\u2026";
     if (state === "error") $("plan-idle").textContent = `PLAN UNREADABLE: ${model.plan.trajectory.error}`.toUpperCase();
+    if (state === "ended") $("plan-idle").textContent = "ENDED (ENGINE RECOVERED) \u00b7 NO PLAN";
     view.plan.shown = state === "shown";
     view.plan.state = state;
     if (state !== "shown") {
-      badge.hidden = true;
+      badge.hidden = state !== "ended";
+      badge.dataset.kind = "ended";
+      badge.textContent = "ENDED";
+      view.plan.badge = state === "ended" ? "ENDED" : null;
       return;
     }
     const status = model.plan.status;
@@ -240,6 +245,10 @@
     } else if (status && status.verified === true) {
       kind = "verified";
       text = "VERIFIED";
+    }
+    if (status && status.late === true && kind === "verified") {
+      kind = "late"; // verified from a state long after the failure: caution, never plain green
+      text = "VERIFIED \u00b7 LATE";
     }
     badge.hidden = false;
     badge.dataset.kind = kind;
@@ -271,9 +280,19 @@
     $("airframe-label").textContent = config && config.airframe ? `AIRFRAME ${config.airframe.toUpperCase()}` : "";
     $("status-source").textContent = config && config.state_topic ? `STATE ${config.state_topic}` : "";
     const failure = model.live && model.live.failure;
+    const episode = model.live && model.live.episode;
+    const phase = episode ? episode.phase : null;
+    let failureText = failure ? `ENGINE FAILURE T+${fmt(failure.age_s, 1)} s` : null;
+    if (phase === "failed" && !failure) failureText = "ENGINE FAILURE"; // the event came before this display started
+    if (phase === "ended") failureText = "ENGINE RECOVERED \u00b7 EPISODE ENDED";
+    else if (phase === "landed") failureText = "LANDED AFTER ENGINE FAILURE";
+    else if (phase === "no_flag") failureText = "NO ENGINE-FAILURE FLAG RECEIVED";
+    else if (phase === "unknown") failureText = "FAILURE EPISODE UNREADABLE";
     const failureLabel = $("failure-label");
-    failureLabel.hidden = !failure;
-    if (failure) failureLabel.textContent = `ENGINE FAILURE T+${fmt(failure.age_s, 1)} s`;
+    failureLabel.hidden = !failureText;
+    failureLabel.dataset.phase = phase || (failure ? "failed" : "");
+    if (failureText) failureLabel.textContent = failureText;
+    view.episode = phase;
     let label = "no envelope";
     if (envelope && envelope.available) {
       label = `envelope ${envelope.envelope_id}` + (envelope.method ? ` \u00b7 ${envelope.method}` : "");

@@ -1,19 +1,31 @@
-"""Envelope status node: is the current state inside the proven-safe part of the H-V envelope?
+"""Envelope status node: the published safety status, never wider than its evidence.
 
-Loads an envelope file (parameter ``envelope_file``; empty = the shipped one) and answers, for every
-canonical state (``/helireach/state``), the envelope's conservative status and margin
-(:meth:`helireach_ros.core.envelope.data.Envelope.query`). Publishes ``/helireach/safety_status``
-(``diagnostic_msgs/DiagnosticStatus``, latched) when the verdict changes and every
-``publish_period``:
+Gathers the evidence and publishes the decision of :func:`helireach_ros.core.safety_status.decide_safety_status`
+(its docstring has the rules) on ``/helireach/safety_status`` (``diagnostic_msgs/DiagnosticStatus``, latched)
+when the verdict changes and every ``publish_period``. The evidence:
+
+- the **envelope** (parameter ``envelope_file``; empty = the shipped one): its conservative answer at the
+  canonical state (``/helireach/state``, :meth:`helireach_ros.core.envelope.data.Envelope.query`), which holds
+  only inside the envelope's validity domain (:mod:`helireach_ros.core.envelope.domain`: level trim at nominal
+  rotor speed, within tolerances; the rotor speed from ``/helireach/rotor_state``);
+- the **live verdict** (``/helireach/live_reachability``, from the planner): the landing NLP solved and
+  replayed from the measured state, evidence while its state is at most ``live_max_age`` old;
+- after a failure (``/helireach/failure_episode`` says ``failed``) only the planner's **current plan**
+  (``/helireach/plan_status`` of that episode);
+- **input QoS**: whatever the rest says, the status is ERROR (``INPUT QOS:``) while a helireach node reports
+  an *input* with incompatible QoS (the ``<node>: QoS`` statuses on ``/diagnostics``, each counting for
+  ``qos_report_timeout``; :mod:`helireach_ros.ros.qos`) or this node's own input has one.
 
 ====== ==========================================================================================
 level  meaning
 ====== ==========================================================================================
-OK     safe, and at least ``warn_margin`` (ft/kt units) from the boundary
-WARN   safe, but closer than ``warn_margin`` to the boundary
-ERROR  not proven safe: unsafe, unverified or failed grid nodes around the state, or outside the grid
-STALE  no envelope (missing, corrupt or mismatched file), no state for ``stale_timeout``, or an
-       invalid state (non-finite, far below ground, out of range)
+OK     SAFE: the evidence covering the state says a verified landing exists (envelope margin at least
+       ``warn_margin``; live J at most ``live_warn_value``); after a failure: a verified plan
+WARN   CAUTION: safe, but near the boundary or a limit, or the rotor speed is not measured
+ERROR  AVOID: not proven safe (unsafe, unverified, failed, outside the grid); after a failure: a fallback,
+       an unverified plan or none yet; any input QoS problem
+STALE  NO DATA: no valid fresh state, or no evidence covers the state (outside the envelope's domain with no
+       current live verdict, or no envelope and no live verdict); on the ground after a landing
 ====== ==========================================================================================
 
 Heights between the monitor's ``min_height`` and 0 count as 0 (sensor noise on the ground). Setting
@@ -22,7 +34,9 @@ Heights between the monitor's ``min_height`` and 0 count as 0 (sensor noise on t
 
 from __future__ import annotations
 
+import math
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -32,11 +46,15 @@ from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from sensor_msgs.msg import JointState
 
-from helireach_ros.core.units import FT, KT
+from helireach_ros.core.envelope.domain import ValidityDomain
+from helireach_ros.core.failure_episode import EpisodeState
+from helireach_ros.core.safety_status import EnvelopeEvidence, LiveEvidence, PlanEvidence, decide_safety_status
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.qos import QOS_STATUS_SUFFIX, QosWatch, input_problems_of
 
 __all__ = ["EnvelopeStatusNode", "SafetyVerdict", "evaluate_safety", "main"]
 
@@ -50,10 +68,6 @@ class SafetyVerdict:
     values: dict[str, Any]
 
 
-def _where(height: float, speed: float) -> str:
-    return f"{height / FT:.0f} ft, {speed / KT:.0f} kt"
-
-
 def evaluate_safety(
     envelope: Any | None,
     reading: rm.OdometryReading | None,
@@ -62,8 +76,16 @@ def evaluate_safety(
     warn_margin: float,
     envelope_error: str = "",
     limits: rm.StateLimits | None = None,
+    input_problems: Sequence[str] = (),
+    *,
+    rotor_speed: float | None = None,
+    live: LiveEvidence | None = None,
+    episode: str = "normal",
+    plan: PlanEvidence | None = None,
+    live_warn_value: float = -0.1,
 ) -> SafetyVerdict:
-    """The safety verdict for a state (see the module docstring for the levels).
+    """The safety verdict for a state: the evidence gathered here, decided by
+    :func:`helireach_ros.core.safety_status.decide_safety_status` (its docstring has the rules).
 
     Args:
         envelope: the loaded :class:`~helireach_ros.core.envelope.data.Envelope`, or None.
@@ -73,37 +95,90 @@ def evaluate_safety(
         warn_margin: WARN below this margin (ft/kt units).
         envelope_error: why there is no envelope.
         limits: plausible ranges (default :class:`~helireach_ros.ros.messages.StateLimits`).
+        input_problems: one line per input with incompatible QoS (``<node>: <topic>: ...``).
+        rotor_speed: the fresh measured rotor speed, rad/s (None: not measured).
+        live: the latest live verdict (``/helireach/live_reachability``), or None.
+        episode: the failure episode's phase (``/helireach/failure_episode``).
+        plan: the current plan of the episode (``/helireach/plan_status``), or None.
+        live_warn_value: live WARN above this J.
     """
-    envelope_id = envelope.envelope_id if envelope is not None else ""
-    values: dict[str, Any] = {"envelope_id": envelope_id, "warn_margin_ft_kt": warn_margin}
-    if envelope is None:
-        return SafetyVerdict(DiagnosticStatus.STALE, f"NO DATA: no envelope ({envelope_error})", values)
+    values: dict[str, Any] = {
+        "envelope_id": envelope.envelope_id if envelope is not None else "",
+        "warn_margin_ft_kt": warn_margin,
+    }
+    state_problem = ""
+    height = forward_speed = math.nan
     if reading is None:
-        return SafetyVerdict(DiagnosticStatus.STALE, "NO DATA: no vehicle state received", values)
-    values.update(
-        height_m=reading.height,
-        forward_speed_m_s=reading.forward_speed,
-        climb_rate_m_s=reading.climb_rate,
-        state_age_s=state_age_s,
+        state_problem = "no vehicle state received"
+    else:
+        values.update(
+            height_m=reading.height,
+            forward_speed_m_s=reading.forward_speed,
+            climb_rate_m_s=reading.climb_rate,
+            state_age_s=state_age_s,
+            state_stamp_ns=reading.stamp_ns,
+        )
+        problems = rm.state_problems(limits or rm.StateLimits(), odometry=reading)
+        if state_age_s > stale_timeout_s:
+            state_problem = f"vehicle state {state_age_s:.1f} s old"
+        elif problems:
+            state_problem = f"invalid state ({'; '.join(problems)})"
+        height, forward_speed = max(reading.height, 0.0), reading.forward_speed
+    evidence = None
+    if envelope is not None and not state_problem:
+        query = envelope.query(height, forward_speed)
+        omega0 = float(envelope.metadata["airframe"]["nominal_rotor_speed"])
+        domain = ValidityDomain.from_metadata(envelope.metadata).check(
+            reading.climb_rate, rotor_speed, omega0, power_fraction=envelope.power_fraction
+        )
+        evidence = EnvelopeEvidence(query.status, query.margin, query.by_interpolation, domain)
+        values["envelope_value"] = query.value
+    decision = decide_safety_status(
+        height=height,
+        forward_speed=forward_speed,
+        state_problem=state_problem,
+        envelope=evidence,
+        envelope_note=envelope_error,
+        live=live,
+        episode=episode,
+        plan=plan,
+        input_problems=input_problems,
+        warn_margin=warn_margin,
+        live_warn_value=live_warn_value,
     )
-    if state_age_s > stale_timeout_s:
-        return SafetyVerdict(DiagnosticStatus.STALE, f"NO DATA: vehicle state {state_age_s:.1f} s old", values)
-    problems = rm.state_problems(limits or rm.StateLimits(), odometry=reading)
-    if problems:
-        return SafetyVerdict(DiagnosticStatus.STALE, f"NO DATA: invalid state ({'; '.join(problems)})", values)
-    height = max(reading.height, 0.0)
-    query = envelope.query(height, reading.forward_speed)
-    values.update(envelope_status=query.status, envelope_value=query.value, margin_ft_kt=query.margin)
-    where = _where(height, reading.forward_speed)
-    if query.status == "safe" and query.margin >= warn_margin:
-        return SafetyVerdict(DiagnosticStatus.OK, f"SAFE: {where}, margin {query.margin:.0f}", values)
-    if query.status == "safe":
-        return SafetyVerdict(DiagnosticStatus.WARN, f"CAUTION: {query.margin:.0f} from the boundary ({where})", values)
-    if query.status == "outside":
-        return SafetyVerdict(DiagnosticStatus.ERROR, f"AVOID: outside the envelope grid, unknown ({where})", values)
-    if query.status == "unsafe":
-        return SafetyVerdict(DiagnosticStatus.ERROR, f"AVOID: no safe landing ({where})", values)
-    return SafetyVerdict(DiagnosticStatus.ERROR, f"AVOID: safe landing not proven, {query.status} ({where})", values)
+    return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[decision.level], decision.message, {**values, **decision.values})
+
+
+def live_evidence(values: dict[str, str], now_ns: int, max_age_s: float) -> LiveEvidence | None:
+    """A ``/helireach/live_reachability`` message as evidence (its age counted on this node's clock)."""
+    try:
+        state_age_s = (now_ns - int(values["state_stamp_ns"])) * 1e-9
+        return LiveEvidence(
+            status=values["status"],
+            value=float(values.get("value", "nan")),
+            verified=values.get("verified") == "true",
+            state_age_s=state_age_s,
+            current=0.0 <= state_age_s <= max_age_s,
+            reason=values.get("reason", ""),
+        )
+    except (KeyError, ValueError):
+        return None  # unreadable: no evidence, never a SAFE
+
+
+def plan_evidence(values: dict[str, str], episode_started_ns: int | None) -> PlanEvidence | None:
+    """The plan status as evidence, if it belongs to the current episode (same failure stamp)."""
+    try:
+        if episode_started_ns is None or int(values.get("failure_stamp_ns", "-1")) != episode_started_ns:
+            return None
+        status = "fallback" if values.get("fallback") == "true" else values.get("status", "none")
+        return PlanEvidence(
+            status=status,
+            verified=values.get("safe") == "true" and values.get("verified") == "true",
+            standby=values.get("standby") == "true",
+            time_to_land_s=float(values.get("time_to_land_s", "nan")),
+        )
+    except ValueError:
+        return None
 
 
 class EnvelopeStatusNode(Node):
@@ -112,7 +187,8 @@ class EnvelopeStatusNode(Node):
     Parameters: ``airframe``, ``gross_weight``, ``density_altitude`` (the aircraft today, shared with the
     planner: :func:`~helireach_ros.ros.messages.declare_aircraft`; an envelope made for another aircraft is
     refused), ``envelope_file`` ('' = shipped; settable at run time), ``warn_margin`` (ft/kt units;
-    settable), ``stale_timeout`` (s), ``publish_period`` (s), ``diagnostics_period`` (s).
+    settable), ``stale_timeout`` (s), ``publish_period`` (s), ``diagnostics_period`` (s), ``qos_report_timeout``
+    (s a node's QoS report on ``/diagnostics`` counts for).
     """
 
     def __init__(self, **node_options: Any) -> None:
@@ -126,6 +202,15 @@ class EnvelopeStatusNode(Node):
         self._stale_timeout = declare("stale_timeout", 0.5, "a state older than this is stale, s", (0.01, 60.0))
         publish_period = declare("publish_period", 0.5, "steady publishing period of the status, s", (0.01, 60.0))
         diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
+        self._qos_report_timeout = declare(
+            "qos_report_timeout", 3.0, "a node's QoS report on /diagnostics counts this long, s", (0.1, 600.0)
+        )
+        self._live_max_age = declare(
+            "live_max_age", 1.0, "a live verdict whose state is older than this is no evidence, s", (0.01, 60.0)
+        )
+        self._live_warn_value = declare(
+            "live_warn_value", -0.1, "a safe live verdict with J above this is CAUTION", (-1.0, 0.0)
+        )
 
         self._lock = threading.Lock()
         self._envelope: Any | None = None
@@ -140,11 +225,18 @@ class EnvelopeStatusNode(Node):
             self.aircraft, self._aircraft_error = None, f"aircraft not configured ({type(error).__name__}: {error})"
         self._reading: rm.OdometryReading | None = None
         self._received_ns = 0
+        self._rotor: tuple[float, int] | None = None  # (rotor speed, received ns)
+        self._live: dict[str, str] | None = None  # the latest /helireach/live_reachability values
+        self._episode = EpisodeState()
+        self._plan: dict[str, str] | None = None  # the latest /helireach/plan_status values
         self._last_published: tuple[bytes, str] | None = None
         self._last_verdict: SafetyVerdict | None = None
+        # Input problems other helireach nodes report: status name → (received ns, problems text).
+        self._qos_reports: dict[str, tuple[int, str]] = {}
 
-        self._status_publisher = self.create_publisher(
-            DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        self._qos_watch = QosWatch(self, diagnostics_period)
+        self._status_publisher = self._qos_watch.create_publisher(
+            DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, rm.LATCHED_QOS
         )
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
@@ -152,9 +244,12 @@ class EnvelopeStatusNode(Node):
         self._load_envelope(envelope_file)
         self.add_on_set_parameters_callback(self._check_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self.create_subscription(
-            Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
-        )
+        self._qos_watch.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY, self._on_live, rm.LATCHED_QOS)
+        self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan, rm.LATCHED_QOS)
+        self._qos_watch.create_subscription(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, self._on_diagnostics, rm.SENSOR_QOS)
         self.create_timer(publish_period, self._publish_steady)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
         self._publish(force=True)
@@ -205,6 +300,74 @@ class EnvelopeStatusNode(Node):
             self._received_ns = self.get_clock().now().nanoseconds
         self._publish(force=False)
 
+    def _on_rotor(self, message: JointState) -> None:
+        try:
+            reading = rm.read_rotor(message)
+        except ValueError:
+            return  # the monitor republishes only valid rotor states; anything else is not a measurement
+        if rm.state_problems(rm.StateLimits(), rotor=reading):
+            return
+        with self._lock:
+            self._rotor = (reading.rotor_speed, self.get_clock().now().nanoseconds)
+
+    def _on_live(self, message: DiagnosticStatus) -> None:
+        with self._lock:
+            self._live = rm.status_values(message)
+        self._publish(force=False)
+
+    def _on_episode(self, message: DiagnosticStatus) -> None:
+        try:
+            episode = EpisodeState.from_values(rm.status_values(message))
+        except ValueError as error:
+            self.get_logger().warning(f"unreadable failure episode ignored: {error}", throttle_duration_sec=5.0)
+            return
+        with self._lock:
+            self._episode = episode
+        self._publish(force=False)
+
+    def _on_plan(self, message: DiagnosticStatus) -> None:
+        with self._lock:
+            self._plan = rm.status_values(message)
+        self._publish(force=False)
+
+    def _evidence(self, now_ns: int) -> tuple[float | None, LiveEvidence | None, str, PlanEvidence | None]:
+        """(fresh rotor speed, live evidence, episode phase, current plan) from what arrived (caller holds the lock)."""
+        rotor_speed = None
+        if self._rotor is not None and (now_ns - self._rotor[1]) * 1e-9 <= self._stale_timeout:
+            rotor_speed = self._rotor[0]
+        live = live_evidence(self._live, now_ns, self._live_max_age) if self._live is not None else None
+        phase = self._episode.phase.value
+        episode = "normal" if phase in ("no_flag", "ended") else phase
+        plan = None
+        if episode == "failed" and self._plan is not None:
+            plan = plan_evidence(self._plan, self._episode.started_ns)
+        return rotor_speed, live, episode, plan
+
+    def _on_diagnostics(self, array: DiagnosticArray) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        own = f"{self.get_name()}{QOS_STATUS_SUFFIX}"
+        changed = False
+        with self._lock:
+            for status in array.status:
+                if status.name.endswith(QOS_STATUS_SUFFIX) and status.name != own:
+                    problems = input_problems_of(status)
+                    previous = self._qos_reports.get(status.name)
+                    changed |= previous is None or previous[1] != problems
+                    self._qos_reports[status.name] = (now_ns, problems)
+        if changed:
+            self._publish(force=True)
+
+    def _input_problems(self, now_ns: int) -> list[str]:
+        """Input QoS problems of this node and of the fresh reports of the others (caller holds the lock)."""
+        own = [f"{self.get_name()}: {text}" for text in self._qos_watch.input_problems()]
+        timeout_ns = self._qos_report_timeout * 1e9
+        reported = [
+            f"{name.removesuffix(QOS_STATUS_SUFFIX)}: {problems}"
+            for name, (received_ns, problems) in sorted(self._qos_reports.items())
+            if problems and now_ns - received_ns <= timeout_ns
+        ]
+        return own + reported
+
     def _publish_steady(self) -> None:
         self._publish(force=True)
 
@@ -213,10 +376,22 @@ class EnvelopeStatusNode(Node):
         now_ns = self.get_clock().now().nanoseconds
         with self._lock:
             age = (now_ns - self._received_ns) * 1e-9 if self._reading is not None else float("inf")
+            rotor_speed, live, episode, plan = self._evidence(now_ns)
             verdict = evaluate_safety(
-                self._envelope, self._reading, age, self._stale_timeout, self._warn_margin, self._envelope_error
+                self._envelope,
+                self._reading,
+                age,
+                self._stale_timeout,
+                self._warn_margin,
+                self._envelope_error,
+                input_problems=self._input_problems(now_ns),
+                rotor_speed=rotor_speed,
+                live=live,
+                episode=episode,
+                plan=plan,
+                live_warn_value=self._live_warn_value,
             )
-            key = (verdict.level, str(verdict.values.get("envelope_status", "")))
+            key = (verdict.level, verdict.message.split(":", 1)[0], str(verdict.values.get("evidence", "")))
             if not force and key == self._last_published:
                 return
             self._last_published = key
@@ -253,7 +428,7 @@ class EnvelopeStatusNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the envelope status node until Ctrl-C or SIGTERM."""
-    run_node(EnvelopeStatusNode, args)
+    raise SystemExit(run_node(EnvelopeStatusNode, args))  # 2: bad command line or parameter (one line on stderr)
 
 
 if __name__ == "__main__":

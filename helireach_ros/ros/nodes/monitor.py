@@ -2,10 +2,15 @@
 
 Subscribes the vehicle state (``/vehicle/odometry``, ``/vehicle/rotor``) and the engine-failure flag
 (``/vehicle/engine_failure``). Every state message is checked — finite, within the plausible ranges
-(parameters), stamp neither older than ``max_message_age`` nor in the future — and only valid ones
-are republished unchanged as the canonical state (``/helireach/state``, ``/helireach/rotor_state``).
-A rising edge of the failure flag is published as a failure event (``/helireach/failure_event``,
-``std_msgs/Header`` stamped with the time the edge was seen). Rejected input is counted, logged
+(parameters), stamp neither older than ``max_message_age`` nor in the future, odometry frames the
+expected ``world_frame``/``body_frame``, stamp newer than the latest accepted one of its input (else dropped:
+:mod:`helireach_ros.core.input_contract`) — and only valid ones are republished unchanged as the canonical
+state (``/helireach/state``, ``/helireach/rotor_state``).
+The failure flag and the valid state drive the failure-episode model
+(:class:`~helireach_ros.core.failure_episode.EpisodeTracker`): each episode start is published once as a failure
+event (``/helireach/failure_event``, ``std_msgs/Header`` stamped with the episode's first true), its state on
+``/helireach/failure_episode`` (on change and every ``diagnostics_period``); until a flag arrives the
+diagnostics WARN "no engine-failure flag received". Rejected input is counted, logged
 (throttled) and reported on ``/diagnostics``; the node never raises out of a callback.
 
 Run: ``python -m helireach_ros.ros.nodes.monitor`` (or the ``helireach_monitor`` console script).
@@ -23,9 +28,18 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 
+from helireach_ros.core.failure_episode import (
+    EpisodePhase,
+    EpisodeSettings,
+    EpisodeState,
+    EpisodeTracker,
+    EpisodeTransition,
+)
+from helireach_ros.core.input_contract import OUT_OF_ORDER, WRONG_FRAME, FrameContract, InputGate
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_checked_parameter
+from helireach_ros.ros.qos import QosWatch
 
 __all__ = ["VehicleMonitor", "main"]
 
@@ -38,7 +52,10 @@ class VehicleMonitor(Node):
     Parameters: ``rotor_joint``; ``max_message_age`` (s; 0 = do not check stamps, for replays of old
     logs); ``stale_timeout`` (s without a valid state before the diagnostics say STALE); the plausible
     ranges ``min_height``, ``max_height`` (m), ``max_forward_speed``, ``max_climb_rate`` (m/s),
-    ``min_rotor_speed``, ``max_rotor_speed`` (rad/s); ``diagnostics_period`` (s).
+    ``min_rotor_speed``, ``max_rotor_speed`` (rad/s); the failure episode's ``recovery_hold`` (s),
+    ``landed_height`` (m), ``landed_climb_rate`` (m/s); ``diagnostics_period`` (s); ``world_frame``,
+    ``body_frame`` (the odometry ``frame_id``/``child_frame_id`` required). Inputs are subscribed BEST_EFFORT
+    (every publisher matches); incompatible QoS is the ``<node>: QoS`` status (:mod:`helireach_ros.ros.qos`).
     """
 
     def __init__(self, **node_options: Any) -> None:
@@ -69,7 +86,16 @@ class VehicleMonitor(Node):
                 "max_rotor_speed", defaults.max_rotor_speed, "highest plausible rotor speed, rad/s", (1.0, 1e4)
             ),
         )
+        self._episode_settings = EpisodeSettings(
+            recovery_hold=declare("recovery_hold", 3.0, "steady false flag that ends an episode, s", (0.01, 3600.0)),
+            landed_height=declare("landed_height", 0.3, "failed and at most this high = landed, m", (0.0, 100.0)),
+            landed_climb_rate=declare(
+                "landed_climb_rate", 0.3, "largest |climb rate| that counts as landed, m/s", (0.001, 100.0)
+            ),
+        )
         diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
+        world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "required odometry header.frame_id")
+        body_frame = declare("body_frame", rm.DEFAULT_BODY_FRAME, "required odometry child_frame_id")
 
         self._lock = threading.Lock()
         self._counts = {
@@ -82,30 +108,27 @@ class VehicleMonitor(Node):
         self._last_valid_odometry_ns: int | None = None
         self._last_valid_rotor_ns: int | None = None
         self._last_rejection: tuple[int, str] | None = None
-        self._engine_failed: bool | None = None
+        self._episodes = EpisodeTracker(self._episode_settings)  # the failure-episode model (core.failure_episode)
         self._vehicle_frame = rm.DEFAULT_BODY_FRAME
+        # The input contract (core.input_contract): frames, then values, then stamp order, per stamped input.
+        self._gates = {"odometry": InputGate(FrameContract(world_frame, body_frame)), "rotor": InputGate()}
+        self._last_drop: tuple[int, str] | None = None
+        self._qos_watch = QosWatch(self, diagnostics_period)
 
-        self._state_publisher = self.create_publisher(
-            Odometry, rm.TOPIC_STATE, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
-        )
-        self._rotor_publisher = self.create_publisher(
-            JointState, rm.TOPIC_ROTOR_STATE, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
-        )
-        self._event_publisher = self.create_publisher(
-            Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        self._state_publisher = self._qos_watch.create_publisher(Odometry, rm.TOPIC_STATE, rm.STREAM_QOS)
+        self._rotor_publisher = self._qos_watch.create_publisher(JointState, rm.TOPIC_ROTOR_STATE, rm.STREAM_QOS)
+        self._event_publisher = self._qos_watch.create_publisher(Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS)
+        self._episode_publisher = self._qos_watch.create_publisher(
+            DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.STREAM_QOS
         )
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
-        self.create_subscription(
-            Odometry, rm.TOPIC_ODOMETRY, self._on_odometry, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
-        )
-        self.create_subscription(
-            JointState, rm.TOPIC_ROTOR, self._on_rotor, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
-        )
-        self.create_subscription(
-            Bool, rm.TOPIC_ENGINE_FAILURE, self._on_failure_flag, rm.EVENT_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
-        )
+        # Every vehicle input BEST_EFFORT, VOLATILE: reliable and best-effort, volatile and latched publishers all
+        # match (msg_docs/vehicle_*.md); the flag is published steadily, so a lost sample only delays its edge.
+        self._qos_watch.create_subscription(Odometry, rm.TOPIC_ODOMETRY, self._on_odometry, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR, self._on_rotor, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(Bool, rm.TOPIC_ENGINE_FAILURE, self._on_failure_flag, rm.SENSOR_QOS)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
 
     # -- inputs ------------------------------------------------------------------------------------------------
@@ -129,29 +152,45 @@ class VehicleMonitor(Node):
             self._last_rejection = (now_ns, text)
         self.get_logger().warning(text, throttle_duration_sec=1.0)
 
+    def _admit(
+        self, kind: str, stamp_ns: int, now_ns: int, problems: list[str], frame_id: str = "", child_frame_id: str = ""
+    ) -> bool:
+        """The input contract of one message (frames, values, stamp order): True if it may be used."""
+        with self._lock:
+            verdict = self._gates[kind].judge(stamp_ns, now_ns, frame_id, child_frame_id, problems)
+            if verdict.reason == OUT_OF_ORDER:
+                self._last_drop = (now_ns, f"{kind} dropped: {verdict.text}")
+        if verdict.reason == OUT_OF_ORDER:
+            self.get_logger().warning(f"{kind} dropped: {verdict.text}", throttle_duration_sec=1.0)
+        elif not verdict.accepted:
+            self._reject(kind, list(verdict.problems), now_ns)
+        return verdict.accepted
+
     def _on_odometry(self, message: Odometry) -> None:
         now_ns = self._now_ns()
         reading = rm.read_odometry(message)
         problems = rm.state_problems(self._limits, odometry=reading) + self._stamp_problems(reading.stamp_ns, now_ns)
-        if problems:
-            self._reject("odometry", problems, now_ns)
+        if not self._admit(
+            "odometry", reading.stamp_ns, now_ns, problems, message.header.frame_id, message.child_frame_id
+        ):
             return
         with self._lock:
             self._counts["odometry_valid"] += 1
             self._last_valid_odometry_ns = now_ns
             self._vehicle_frame = message.child_frame_id or self._vehicle_frame
+            landing = self._episodes.observe_state(reading.height, reading.climb_rate, now_ns)
         self._state_publisher.publish(message)
+        self._report_episode(landing)
 
     def _on_rotor(self, message: JointState) -> None:
         now_ns = self._now_ns()
         try:
             reading = rm.read_rotor(message, self._rotor_joint)
         except ValueError as error:
-            self._reject("rotor", [str(error)], now_ns)
+            self._admit("rotor", rm.stamp_nanoseconds(message.header.stamp), now_ns, [str(error)])
             return
         problems = rm.state_problems(self._limits, rotor=reading) + self._stamp_problems(reading.stamp_ns, now_ns)
-        if problems:
-            self._reject("rotor", problems, now_ns)
+        if not self._admit("rotor", reading.stamp_ns, now_ns, problems):
             return
         with self._lock:
             self._counts["rotor_valid"] += 1
@@ -159,17 +198,32 @@ class VehicleMonitor(Node):
         self._rotor_publisher.publish(message)
 
     def _on_failure_flag(self, message: Bool) -> None:
-        failed = bool(message.data)
+        now_ns = self._now_ns()
         with self._lock:
-            rising = failed and not self._engine_failed  # unknown before the first message counts as running
-            self._engine_failed = failed
-            if rising:
+            transition = self._episodes.observe_flag(bool(message.data), now_ns)
+            if transition is not None and transition.started:
                 self._counts["failure_events"] += 1
-            frame = self._vehicle_frame
-        if rising:
-            event = Header(stamp=rm.stamp_message(self._now_ns()), frame_id=frame)
-            self._event_publisher.publish(event)
-            self.get_logger().warning("ENGINE FAILURE: failure event published")
+        self._report_episode(transition)
+
+    def _report_episode(self, transition: EpisodeTransition | None) -> None:
+        """On a phase change: the failure event (once per episode, stamped with its start) and the episode state."""
+        if transition is None:
+            return
+        state = transition.state
+        if transition.started:
+            with self._lock:
+                frame = self._vehicle_frame
+            self._event_publisher.publish(Header(stamp=rm.stamp_message(state.started_ns), frame_id=frame))
+            self.get_logger().warning(f"ENGINE FAILURE: episode {state.episode_id}, failure event published")
+        else:
+            self.get_logger().warning(f"failure episode: {transition.previous.value} -> {state.text}")
+        self._publish_episode(state)
+
+    def _publish_episode(self, state: EpisodeState) -> None:
+        values = {**state.as_values(), "recovery_hold_s": self._episode_settings.recovery_hold}
+        level = rm.DIAGNOSTIC_LEVELS[state.level_name]
+        name = f"{self.get_name()}: failure episode"
+        self._episode_publisher.publish(rm.diagnostic_status(level, name, state.text, "vehicle", values))
 
     # -- diagnostics -------------------------------------------------------------------------------------------
     def diagnostic(self) -> DiagnosticStatus:
@@ -182,7 +236,13 @@ class VehicleMonitor(Node):
                 self._last_valid_rotor_ns,
                 self._last_rejection,
             )
-            engine_failed = self._engine_failed
+            episode = self._episodes.state
+            contract_counts = {
+                f"{kind}_{reason}": gate.counts[reason]
+                for kind, gate in self._gates.items()
+                for reason in (WRONG_FRAME, OUT_OF_ORDER)
+            }
+            drop = self._last_drop
         timeout_ns = self._stale_timeout * 1e9
         odometry_fresh = odometry_ns is not None and now_ns - odometry_ns <= timeout_ns
         rotor_fresh = rotor_ns is not None and now_ns - rotor_ns <= timeout_ns
@@ -197,8 +257,19 @@ class VehicleMonitor(Node):
             level, text = DiagnosticStatus.OK, "vehicle state valid"
         if recent_rejection and level == DiagnosticStatus.STALE:
             text = f"{text}; {rejection[1]}"
+        if level == DiagnosticStatus.OK and drop is not None and now_ns - drop[0] <= timeout_ns:
+            level, text = DiagnosticStatus.WARN, drop[1]  # the state stays valid: the older message was not used
+        if episode.phase is EpisodePhase.NO_FLAG:  # the state may be fine, but a failure could not be seen
+            no_flag = "no engine-failure flag received"
+            if level == DiagnosticStatus.OK:
+                level, text = DiagnosticStatus.WARN, no_flag
+            else:
+                text = f"{text}; {no_flag}"
         values: dict[str, Any] = dict(counts)
-        values["engine_failed"] = "unknown" if engine_failed is None else engine_failed
+        values.update(contract_counts)
+        values["last_out_of_order"] = drop[1] if drop is not None else ""
+        values["engine_failed"] = "unknown" if episode.flag is None else episode.flag
+        values.update(failure_episode=episode.phase.value, episode_id=episode.episode_id)
         values["state_age_s"] = (now_ns - odometry_ns) * 1e-9 if odometry_ns is not None else float("inf")
         values["rotor_age_s"] = (now_ns - rotor_ns) * 1e-9 if rotor_ns is not None else float("inf")
         values["last_rejection"] = rejection[1] if rejection is not None else ""
@@ -206,11 +277,14 @@ class VehicleMonitor(Node):
 
     def _publish_diagnostics(self) -> None:
         self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), self.diagnostic()))
+        with self._lock:
+            episode = self._episodes.state
+        self._publish_episode(episode)  # periodically too: late joiners (the topic is not latched)
 
 
 def main(args: list[str] | None = None) -> None:
     """Runs the monitor until Ctrl-C or SIGTERM."""
-    run_node(VehicleMonitor, args)
+    raise SystemExit(run_node(VehicleMonitor, args))  # 2: bad command line or parameter (one line on stderr)
 
 
 if __name__ == "__main__":

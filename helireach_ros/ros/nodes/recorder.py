@@ -7,6 +7,20 @@ connects to best-effort and volatile publishers and still receives the current v
 topics such as ``/helireach/safety_status`` even when it starts after their publisher. The QoS the
 publisher offers is stored with the topic, so a replay keeps latched topics latched.
 
+Discovery gap: a topic is subscribed only once its publisher is discovered (as ``ros2 bag record``), so
+messages a publisher in *another process* sends before discovery completes (typically 0.1–0.5 s after
+both exist) are not recorded: start the recorder first. The composed bringup creates it first and waits
+(:meth:`McapRecorder.wait_until_recording`) before anything spins.
+
+Metadata: every recorder writes the ``helireach`` record itself (:mod:`helireach_ros.core.mcap_log.run_metadata`):
+airframe and conditions from the shared ``airframe``/``gross_weight``/``density_altitude`` parameters, the
+``planner_settings`` file, then the envelope id and the planner's aircraft as ``/helireach/safety_status`` and
+``/helireach/plan_status`` report them, so ``helireach replay --compare`` works on a multi-process run's log.
+
+Loss bound: the open chunk is written out once its oldest message has waited ``flush_period`` (0.5 s),
+checked at every message and every ``flush_period / 2``, so no message waits in memory longer than
+0.75 s plus executor latency and a SIGKILL loses under 1 s of messages (README, "Logs").
+
 Run: ``python -m helireach_ros.ros.nodes.recorder --ros-args -p log_dir:=/tmp/logs``. SIGINT/SIGTERM end
 spinning and the file is finished (summary and index written).
 """
@@ -15,22 +29,27 @@ from __future__ import annotations
 
 import importlib
 import os
+import sys
 import time
 from collections.abc import Mapping, Sequence
 from functools import partial
 from pathlib import Path
 from typing import Any
 
-from rcl_interfaces.msg import ParameterDescriptor
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from rclpy.subscription import Subscription
 from rclpy.timer import Timer
 from rclpy.topic_endpoint_info import TopicEndpointInfo
 
+from helireach_ros import __version__
 from helireach_ros.core.mcap_log import McapLogError, McapLogWriter, QosDescription
+from helireach_ros.core.mcap_log.run_metadata import aircraft_metadata, status_metadata_updates
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
+from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
 
 __all__ = [
     "DEFAULT_TOPICS",
@@ -47,6 +66,9 @@ DEFAULT_TOPICS: tuple[str, ...] = tuple(f"{spec.name}:{spec.type_name}" for spec
 
 _DEFAULT_QOS = QosDescription("reliable", "volatile", 10)
 _DISCOVERY_PERIOD_S = 0.1  # rosbag2 polls the graph at the same rate
+_MATCH_POLL_S = 0.01
+# Status topics whose values the metadata adopts (run_metadata.status_metadata_updates).
+_METADATA_SOURCES = {rm.TOPIC_SAFETY_STATUS: "safety_status", rm.TOPIC_PLAN_STATUS: "plan_status"}
 _MIN_SUBSCRIPTION_DEPTH = 100  # a recorder should absorb bursts rather than drop
 
 
@@ -139,32 +161,46 @@ class McapRecorder(Node):
     """Record topics into ``<log_dir>/helireach_<UTC yyyymmdd_HHMMSS>_<pid>.mcap``.
 
     Parameters (read-only): ``log_dir`` (``~`` expanded), ``topics`` (``/topic:pkg/msg/Type``),
-    ``chunk_size`` (bytes per MCAP chunk), ``flush_period`` (seconds between forced chunk ends, which
-    bounds what a hard kill loses; 0 disables).
+    ``chunk_size`` (bytes per MCAP chunk), ``flush_period`` (longest wait of a message in the open chunk, s,
+    which bounds what a hard kill loses; 0 = size only), the shared ``airframe``, ``gross_weight``,
+    ``density_altitude`` and ``planner_settings`` (file, '' = config/planner.yaml) for the metadata.
 
     Args:
-        metadata: Stored as the log's ``helireach`` metadata record (airframe, envelope id,
-            software version, scenario...).
+        metadata: Merged over what the recorder knows itself into the log's ``helireach`` metadata record
+            (e.g. the scenario, or the composed planner's values).
         **kwargs: Passed to :class:`rclpy.node.Node` (``context``, ``parameter_overrides``...).
     """
 
     def __init__(self, metadata: Mapping[str, str] | None = None, **kwargs: Any) -> None:
         super().__init__("helireach_recorder", **kwargs)
         self._closed = False
-        log_dir = self._declare("log_dir", "~/.helireach/logs", "Directory for the .mcap logs.")
-        entries = self._declare("topics", list(DEFAULT_TOPICS), "Recorded topics as /topic:pkg/msg/Type.")
-        chunk_size = self._declare("chunk_size", 64 * 1024, "Uncompressed bytes per MCAP chunk.")
-        flush_period = self._declare(
-            "flush_period", 1.0, "Seconds between forced chunk ends (bounds loss on a hard kill); 0 = off."
+        declare = partial(declare_checked_parameter, self)
+        log_dir = declare("log_dir", "~/.helireach/logs", "Directory for the .mcap logs.")
+        entries = declare("topics", list(DEFAULT_TOPICS), "Recorded topics as /topic:pkg/msg/Type.")
+        chunk_size = declare("chunk_size", 64 * 1024, "Uncompressed bytes per MCAP chunk.", (1024, 1 << 30))
+        flush_period = declare(
+            "flush_period",
+            0.5,
+            "Longest wait of a message in memory, s (bounds loss on a hard kill); 0 = off.",
+            (0.0, 60.0),
+        )
+        load_aircraft = declare_aircraft(self)
+        settings_file = declare(
+            "planner_settings", "", "planner settings file for the metadata ('' = config/planner.yaml)"
         )
         self._pending = _parse_topics(entries)
         directory = Path(os.path.expandvars(os.path.expanduser(log_dir)))
         directory.mkdir(parents=True, exist_ok=True)
-        self._writer = McapLogWriter(_new_log_path(directory), metadata=metadata, chunk_size=chunk_size)
+        known = {**self._own_metadata(load_aircraft, settings_file), **(metadata or {})}
+        max_chunk_age = flush_period if flush_period > 0 else None
+        self._writer = McapLogWriter(
+            _new_log_path(directory), metadata=known, chunk_size=chunk_size, max_chunk_age=max_chunk_age
+        )
         self._subscriptions_by_topic: dict[str, Subscription] = {}
         self._warned_types: set[str] = set()
+        self._unreadable_status: set[str] = set()
         self._discovery_timer: Timer | None = self.create_timer(_DISCOVERY_PERIOD_S, self._discover)
-        self._flush_timer = self.create_timer(flush_period, self._writer.flush) if flush_period > 0 else None
+        self._flush_timer = self.create_timer(flush_period / 2, self._writer.flush_stale) if flush_period > 0 else None
         self.get_logger().info(f"recording {len(self._pending)} topics to {self.log_path}")
         self._discover()
 
@@ -183,6 +219,51 @@ class McapRecorder(Node):
         """Topics subscribed so far (a publisher has been discovered)."""
         return sorted(self._subscriptions_by_topic)
 
+    @property
+    def metadata(self) -> dict[str, str]:
+        """The log's current ``helireach`` metadata."""
+        return self._writer.metadata
+
+    def update_metadata(self, values: Mapping[str, str]) -> None:
+        """Merge values into the log's ``helireach`` metadata (a change writes the record again)."""
+        if not self._closed:
+            self._writer.update_metadata(values)
+
+    def wait_until_recording(self, timeout_s: float) -> bool:
+        """Subscribe to every topic that has a publisher now and wait until each subscription has matched them all.
+
+        For the composed system before it spins (nothing is published yet), and for tests; bounded by ``timeout_s``.
+
+        Returns:
+            Whether every discovered publisher of a recorded topic is matched.
+        """
+        deadline = time.monotonic() + timeout_s
+        while True:
+            self._discover()
+            if self._all_matched() or time.monotonic() >= deadline:
+                return self._all_matched()
+            time.sleep(_MATCH_POLL_S)
+
+    def _all_matched(self) -> bool:
+        for topic, (type_name, _) in self._pending.items():
+            if any(p.topic_type == type_name for p in self.get_publishers_info_by_topic(topic)):
+                return False  # a publisher the next _discover() subscribes to
+        for topic, subscription in self._subscriptions_by_topic.items():
+            if subscription.get_publisher_count() < self.count_publishers(topic):
+                return False
+        return True
+
+    def _own_metadata(self, load_aircraft: Any, settings_file: str) -> dict[str, str]:
+        """What this recorder knows by itself: software, command, aircraft and planner settings from its parameters."""
+        from helireach_ros.core.settings import load_settings
+
+        values = {"software_version": __version__, "command": " ".join(sys.argv) or "helireach_recorder"}
+        try:
+            values.update(aircraft_metadata(load_aircraft(), load_settings(settings_file or None)))
+        except Exception as exc:  # a broken file must not stop the recorder; the log then says less
+            self.get_logger().error(f"log metadata without airframe/planner settings: {exc}")
+        return values
+
     def close(self) -> None:
         """Finish the log file (summary and index); idempotent."""
         if self._closed:
@@ -198,10 +279,6 @@ class McapRecorder(Node):
         """Finish the log, then destroy the node."""
         self.close()
         super().destroy_node()
-
-    def _declare(self, name: str, default: Any, description: str) -> Any:
-        descriptor = ParameterDescriptor(description=description, read_only=True)
-        return self.declare_parameter(name, default, descriptor).value
 
     def _discover(self) -> None:
         """Subscribe to every pending topic that now has a publisher of the configured type."""
@@ -237,15 +314,31 @@ class McapRecorder(Node):
         source = info.get("source_timestamp") if isinstance(info, Mapping) else None
         try:
             self._writer.write(topic, data, log_time, source or log_time)
+            source_kind = _METADATA_SOURCES.get(topic)
+            if source_kind is not None:
+                self._adopt_status(topic, source_kind, data)
         except McapLogError:
             # A callback racing close() (a stop signal, another executor thread): the log is already finished.
             if not self._writer.closed:
                 raise
 
+    def _adopt_status(self, topic: str, source_kind: str, data: bytes) -> None:
+        """Take the envelope id / the planner's aircraft from a status message into the metadata."""
+        try:
+            values = rm.status_values(deserialize_message(data, DiagnosticStatus))
+        except Exception as exc:  # a foreign publisher's bad bytes are still recorded; only the metadata skips them
+            if topic not in self._unreadable_status:
+                self._unreadable_status.add(topic)
+                self.get_logger().warning(f"{topic}: cannot read status values for the metadata: {exc}")
+            return
+        updates = status_metadata_updates(self._writer.metadata, values, source_kind)
+        if updates:
+            self._writer.update_metadata(updates)
+
 
 def main(args: list[str] | None = None) -> None:
     """Run the recorder until SIGINT/SIGTERM, then finish the log (destroying the node closes it)."""
-    run_node(McapRecorder, args)
+    raise SystemExit(run_node(McapRecorder, args))  # 2: bad command line or parameter (one line on stderr)
 
 
 if __name__ == "__main__":

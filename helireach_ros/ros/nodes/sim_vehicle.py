@@ -213,7 +213,7 @@ class SimVehicleNode(Node):
 
 def main(args: list[str] | None = None) -> None:
     """Runs the simulated vehicle until Ctrl-C or SIGTERM."""
-    run_node(SimVehicleNode, args)
+    raise SystemExit(run_node(SimVehicleNode, args))  # 2: bad command line or parameter (one line on stderr)
 
 
 if __name__ == "__main__":
