@@ -167,3 +167,21 @@ def test_params_files_in_every_rcl_layout_pass_the_check(tmp_path):
     nested = tmp_path / "nested.yaml"
     nested.write_text("/aircraft1:\n  helireach_monitor:\n    ros__parameters: {stale_timeout: 0.4}\n")
     check_ros_arguments(["--params-file", str(config_path("nodes.yaml")), "--params-file", str(nested), "-p", "a:=1"])
+
+
+def test_the_display_script_has_help_and_refuses_a_bad_parameter(isolated_ros):
+    usage = run("helireach_display", "--help")
+    assert usage.returncode == 0 and usage.stdout.startswith("usage: helireach_display") and "port" in usage.stdout
+    assert not (isolated_ros / "ros_log").exists()
+    assert_one_line_error(run("helireach_display", "--ros-args", "-p", "port:=99999"), "'port' of helireach_display")
+
+
+def test_the_demo_refuses_a_missing_parameter_file(isolated_ros):
+    result = subprocess.run(
+        [sys.executable, "-m", "helireach_ros.cli.demo", "--no-display", "--params-file", str(isolated_ros / "nope")],
+        capture_output=True,
+        text=True,
+        timeout=TIMEOUT_S,
+    )
+    assert result.returncode == 2 and "nope" in result.stderr and "Traceback" not in result.stderr
+

@@ -220,14 +220,18 @@ def main(argv: list[str] | None = None) -> int:
         "--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="executor kind (default: %(default)s)"
     )
     arguments = parser.parse_args(argv)
-    result = run_demo(
-        arguments.out,
-        arguments.scenario,
-        hold=arguments.hold,
-        display=arguments.display,
-        params_files=tuple(arguments.params_file),
-        executor=arguments.executor,
-    )
+    try:
+        result = run_demo(
+            arguments.out,
+            arguments.scenario,
+            hold=arguments.hold,
+            display=arguments.display,
+            params_files=tuple(arguments.params_file),
+            executor=arguments.executor,
+        )
+    except (FileNotFoundError, ValueError) as error:  # a missing parameter file, a bad parameter or scenario
+        print(f"helireach demo: {error}", file=sys.stderr)
+        return 2
     print(summary(result), flush=True)
     return 0 if result.landed_within_limits else 1
 

@@ -61,7 +61,8 @@ from helireach_ros.display.sections import (
 )
 from helireach_ros.display.server import DisplayServerError, PageServer
 from helireach_ros.ros import messages as rm
-from helireach_ros.ros.parameters import declare_checked_parameter
+from helireach_ros.ros.executors import node_command_line
+from helireach_ros.ros.parameters import ParameterError, declare_checked_parameter
 from helireach_ros.ros.qos import QosWatch
 
 __all__ = [
@@ -506,7 +507,10 @@ def create_display_with_fallback(preferred_port: int = DEFAULT_PORT, **node_opti
 
 
 def run_display(
-    args: list[str] | None = None, parameter_overrides: list[Parameter] | None = None, hold: bool = False
+    args: list[str] | None = None,
+    parameter_overrides: list[Parameter] | None = None,
+    hold: bool = False,
+    program: str = "helireach display",
 ) -> int:
     """Runs the display until Ctrl-C/SIGTERM (then, with ``hold``, keeps the page up until the next one).
 
@@ -514,9 +518,10 @@ def run_display(
         args: ROS command-line arguments (``--ros-args ...``), as for ``rclpy.init``.
         parameter_overrides: node parameters, e.g. ``[Parameter("port", value=0)]``.
         hold: keep serving the last data after ROS stops.
+        program: how error lines name the command.
 
     Returns:
-        0, or 1 when the web server cannot start.
+        0, 1 when the web server cannot start, 2 for a bad parameter value (one line on stderr).
     """
     # SIGTERM as well as SIGINT end spinning cleanly (rclpy's handlers wake the blocked executor)
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
@@ -526,8 +531,11 @@ def run_display(
         print(f"helireach display: {display.url}", flush=True)
         rclpy.spin(display)
     except DisplayServerError as error:
-        print(f"helireach display: {error}", file=sys.stderr, flush=True)
+        print(f"{program}: {error}", file=sys.stderr, flush=True)
         return 1
+    except ParameterError as error:
+        print(f"{program}: error: {error}", file=sys.stderr, flush=True)
+        return 2
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
@@ -540,8 +548,15 @@ def run_display(
 
 
 def main(args: list[str] | None = None) -> None:
-    """Console entry point (ros2/demos style): ``python -m helireach_ros.display.node --ros-args ...``."""
-    code = run_display(args)
+    """Console entry point (ros2/demos style): ``python -m helireach_ros.display.node --ros-args ...``.
+
+    ``--help`` prints the usage and a bad command line exits 2, as for every node script
+    (:func:`~helireach_ros.ros.executors.node_command_line`).
+    """
+    arguments, script, early_exit = node_command_line(CockpitDisplay, args)
+    if early_exit is not None:
+        raise SystemExit(early_exit)
+    code = run_display(arguments, program=script)
     if code:
         raise SystemExit(code)
 
