@@ -66,7 +66,9 @@ def _logged_plans(path: Path) -> tuple[list[tuple[dict[str, str], Any]], dict[st
         if message.topic == rm.TOPIC_PLAN_STATUS:
             values = rm.status_values(deserialize_message(message.cdr, DiagnosticStatus))
             converged = values.get("status") in ("safe", "unsafe", "unverified") and values.get("fallback") == "false"
-            if converged and values.get("replan_index") == "0":
+            # A standby plan was made before the failure from a live state, warm-started along the live chain
+            # (not in the log): the first plan *of the failure* is the refined one that follows it.
+            if converged and values.get("replan_index") == "0" and values.get("standby") != "true":
                 statuses.append(values)
         elif message.topic == rm.TOPIC_LANDING_TRAJECTORY:
             trajectory = deserialize_message(message.cdr, JointTrajectory)
