@@ -1,6 +1,7 @@
 """H-V envelope throughput: wall time and nodes/s for a full grid with 1 and 2 workers, and where the time goes.
 
 Run: .venv/bin/python bench/envelope_throughput.py [--workers 1,2] [--heights-ft 0:800:41] [--speeds-kt 0:120:25]
+     [--baseline] [--repeat N]
 
 Each run is the complete pipeline of ``helireach envelope compute`` (sweep, cold re-checks, boundary
 refinement) with the default airframe and planner settings; 1 worker runs in this process, more use a
@@ -8,16 +9,24 @@ local process pool (worker start-up included). Prints per run: wall time, nodes/
 re-solved cold, solve counts, per-phase wall time; then, from a few sweep columns timed in this process,
 how a node's time splits between IPOPT and the rest of ``plan`` (decode + CVODES replay). The machine's
 load average is printed too: other processes on a shared machine slow every number here.
+
+``--baseline`` runs, for each worker count, the configuration before issue 13 (legacy sweep: cold restart
+after every not-safe node; the warm-solver options of then; plain CasADi functions) and the current one,
+alternating ``--repeat`` times, and prints the ratio of their wall times (the comparison that holds on a
+busy machine) and whether the two envelopes classify every node identically.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
+import sys
 import time
 
 import numpy as np
+from baseline_config import baseline_codegen, baseline_settings, load_average
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.compute import EnvelopeJob, _solve_point, _warm_start_of, compute_envelope
@@ -29,7 +38,13 @@ from helireach_ros.core.settings import load_settings
 from helireach_ros.core.units import FT, KT
 
 
-def _run(job: EnvelopeJob, workers: int) -> None:
+def _baseline_job(job: EnvelopeJob) -> EnvelopeJob:
+    return dataclasses.replace(
+        job, settings=baseline_settings(job.settings), codegen=baseline_codegen(), legacy_sweep=True
+    )
+
+
+def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float, np.ndarray]:
     load_before = os.getloadavg()[0]
     started = time.perf_counter()
     executor = make_executor(workers)
@@ -44,9 +59,24 @@ def _run(job: EnvelopeJob, workers: int) -> None:
     solves = counters["sweep_solves"] + counters["cold_rechecks"] + counters["bisection_solves"]
     counts = {name: int((envelope.status == name).sum()) for name in ("safe", "unsafe", "unverified", "failed")}
     phases = ", ".join(f"{name} {seconds:.1f} s" for name, seconds in compute["phases_s"].items())
-    print(f"\n{workers} worker(s) [{executor.description}]")
+    print(f"\n{workers} worker(s) [{executor.description}]{label}")
     print(f"  wall time            {wall:7.1f} s   ({nodes / wall:.1f} nodes/s, {solves / wall:.1f} solves/s)")
     print(f"  phases               {phases}")
+    worker_time = ", ".join(
+        f"{name} {compute['phase_ipopt_s'].get(name, 0.0):.1f} s IPOPT of {seconds:.1f} s solve+replay"
+        for name, seconds in compute["phase_solve_and_replay_s"].items()
+    )
+    print(f"  worker time          {worker_time}")
+    cpu = compute["phase_solve_and_replay_cpu_s"]
+    print(f"  worker CPU time      {sum(cpu.values()):.1f} s ({', '.join(f'{k} {v:.1f} s' for k, v in cpu.items())})")
+    sweep_cold = (
+        counters["sweep_solves"] - counters["sweep_warm_solves"] + counters.get("sweep_guesses_replaced_cold", 0)
+    )
+    print(
+        f"  sweep                {sweep_cold} cold solves, {counters.get('sweep_warm_from_not_safe', 0)} kept warm "
+        f"answers started from not-safe plans, {counters.get('sweep_guesses_replaced_cold', 0)} replaced cold; "
+        f"re-checks skipped (verdict fixed) {counters.get('rechecks_skipped_unsafe', 0)}"
+    )
     print(f"  nodes re-solved cold {counters['cold_rechecks'] / nodes:7.1%}  ({counters['cold_rechecks']} of {nodes})")
     print(
         f"  solves               {solves} = sweep {counters['sweep_solves']} ({counters['sweep_warm_solves']} warm) "
@@ -55,6 +85,7 @@ def _run(job: EnvelopeJob, workers: int) -> None:
     )
     print(f"  result               {counts}, envelope {envelope.envelope_id}")
     print(f"  load average         {load_before:.2f} before, {os.getloadavg()[0]:.2f} after")
+    return wall, sum(compute["phase_solve_and_replay_cpu_s"].values()), envelope.status.copy()
 
 
 def _time_split(job: EnvelopeJob, columns: list[int]) -> None:
@@ -91,6 +122,8 @@ def main() -> None:
     parser.add_argument("--heights-ft", default="0:800:41")
     parser.add_argument("--speeds-kt", default="0:120:25")
     parser.add_argument("--airframe", default="uh60a_class")
+    parser.add_argument("--baseline", action="store_true", help="also run the configuration before issue 13")
+    parser.add_argument("--repeat", type=int, default=1, help="with --baseline: alternating runs of each")
     arguments = parser.parse_args()
     airframe, settings = load_airframe(arguments.airframe), load_settings()
     job = EnvelopeJob(
@@ -102,8 +135,29 @@ def main() -> None:
         f"intervals; {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, Python "
         f"{platform.python_version()}"
     )
+    print(f"command: {' '.join(sys.argv)}; load average {load_average()}")
     for workers in (int(item) for item in arguments.workers.split(",")):
-        _run(job, workers)
+        if not arguments.baseline:
+            _run(job, workers)
+            continue
+        walls: dict[str, list[float]] = {"baseline": [], "current": []}
+        cpus: dict[str, list[float]] = {"baseline": [], "current": []}
+        statuses = {}
+        for _ in range(arguments.repeat):
+            for name, variant in (("baseline", _baseline_job(job)), ("current", job)):
+                wall, cpu, statuses[name] = _run(variant, workers, f" {name}")
+                walls[name].append(wall)
+                cpus[name].append(cpu)
+        same = int(np.sum(statuses["baseline"] == statuses["current"]))
+        ratios = [current / base for current, base in zip(walls["current"], walls["baseline"], strict=True)]
+        overall = np.sum(walls["current"]) / np.sum(walls["baseline"])
+        cpu_ratio = np.sum(cpus["current"]) / np.sum(cpus["baseline"])
+        print(
+            f"\n{workers} worker(s): current / baseline wall time {overall:.3f}x "
+            f"(per pair {', '.join(f'{r:.3f}' for r in ratios)}), worker CPU time {cpu_ratio:.3f}x; "
+            f"identical classification {same} of "
+            f"{statuses['current'].size} nodes; load average {load_average()}"
+        )
     _time_split(job, [0, len(job.speeds) // 2, len(job.speeds) - 1])
 
 

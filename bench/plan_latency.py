@@ -1,13 +1,19 @@
 """Solve-time percentiles of landing plans across the H-V plane, cold and warm, for both methods.
 
-Run: .venv/bin/python bench/plan_latency.py [--states 60] [--airframe uh60a_class]
+Run: .venv/bin/python bench/plan_latency.py [--states 60] [--airframe uh60a_class] [--baseline] [--method verified]
 
 "Cold" solves start from the transcription's generic guess. Two warm starts are timed:
 "warm, half a cell" starts from the plan of a state 10 ft and 2.5 kt away — half a cell of the
 default 41 × 25 envelope grid, the farthest the planner node's nearest stored plan can be — and
 "warm, far neighbour" starts from the previous state of a serpentine walk over this coarse grid
 (~100 ft / ~17 kt away). Times are IPOPT wall time per solve; the replay, which follows every
-solve, is timed separately. Prints what it measured on this machine.
+solve, is timed separately. Prints what it measured on this machine and the load average.
+
+``--baseline`` also runs the configuration before issue 13 (IPOPT's warm-solver options of then,
+plain CasADi functions) and the warm options alone, on the same states and the same warm starts,
+interleaved state by state so that load changes hit every configuration alike, and prints each
+configuration's total solve time as a ratio to the baseline's (the comparison that holds on a busy
+machine). The compiled functions are used only if the cache holds them (``make nlp-cache``).
 """
 
 from __future__ import annotations
@@ -15,14 +21,17 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import sys
 import time
 
 import numpy as np
+from baseline_config import baseline_codegen, baseline_settings, load_average
 
 from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.planner import LandingPlanner
+from helireach_ros.core.settings import PlannerSettings, load_settings
 from helireach_ros.core.units import FT, KT
 
 
@@ -45,39 +54,82 @@ def _percentiles(samples: list[float]) -> str:
     return f"p50 {p50:7.1f} ms   p95 {p95:7.1f} ms   max {array.max():7.1f} ms"
 
 
+def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str, PlannerSettings, CodegenSettings]]:
+    current = ("current", settings, CodegenSettings.from_environment())
+    if not baseline:
+        return [current]
+    before, plain = baseline_settings(settings), baseline_codegen()
+    return [("before issue 13", before, plain), ("warm options, plain functions", settings, plain), current]
+
+
+def _run_method(airframe, method: str, points, baseline: bool) -> None:
+    configurations = _configurations(load_settings(method=method), baseline)
+    planners = []
+    for name, settings, codegen in configurations:
+        planner = LandingPlanner(airframe, settings, codegen)
+        planners.append(planner)
+        print(f"\nmethod {method}, {name}: NLP built in {planner.build_time_s:.2f} s on {planner.nlp_functions}")
+    samples = [{"cold": [], "near": [], "far": [], "replay": [], "iterations": [], "statuses": {}} for _ in planners]
+    disagreements, value_gap = 0, 0.0
+    previous = None
+    for height_ft, speed_kt in points:
+        state = initial_state_after_failure(airframe, height_ft * FT, speed_kt * KT)
+        nearby = initial_state_after_failure(airframe, (height_ft + 10.0) * FT, (speed_kt + 2.5) * KT)
+        reference = planners[-1].plan(state)  # every configuration warm-starts from the same plans
+        near_plans = []
+        for planner, sample in zip(planners, samples, strict=True):
+            started = time.perf_counter()
+            cold_plan = planner.plan(state)
+            sample["replay"].append(1e3 * (time.perf_counter() - started) - cold_plan.solver.solve_time_ms)
+            sample["cold"].append(cold_plan.solver.solve_time_ms)
+            sample["statuses"][cold_plan.status] = sample["statuses"].get(cold_plan.status, 0) + 1
+            near = planner.plan(nearby, warm_start=reference.warm_start)
+            near_plans.append(near)
+            sample["near"].append(near.solver.solve_time_ms)
+            sample["iterations"].append(near.solver.iterations)
+            if previous is not None:
+                sample["far"].append(planner.plan(state, warm_start=previous.warm_start).solver.solve_time_ms)
+        disagreements += len({plan.status for plan in near_plans}) > 1
+        value_gap = max(value_gap, max(abs(plan.value - near_plans[0].value) for plan in near_plans))
+        previous = reference
+    for (name, _, _), sample in zip(configurations, samples, strict=True):
+        print(f"\nmethod {method}, {name}: cold statuses {sample['statuses']}")
+        print(f"  cold solve        {_percentiles(sample['cold'])}")
+        print(
+            f"  warm, half a cell {_percentiles(sample['near'])}   (from a plan 10 ft / 2.5 kt away; "
+            f"{np.mean(sample['iterations']):.1f} iterations)"
+        )
+        print(f"  warm, far         {_percentiles(sample['far'])}   (from the previous serpentine state's plan)")
+        print(f"  replay + decode   {_percentiles(sample['replay'])}")
+    if baseline:
+        print(f"\nmethod {method}: ratios of total solve time to '{configurations[0][0]}' (same states, same run)")
+        for (name, _, _), sample in zip(configurations, samples, strict=True):
+            ratios = [
+                f"{kind} {np.sum(sample[kind]) / np.sum(samples[0][kind]):.3f}x" for kind in ("cold", "near", "far")
+            ]
+            print(f"  {name:32s} {', '.join(ratios)}")
+        print(
+            f"  warm half-a-cell plans: status differs between configurations at {disagreements} of {len(points)} "
+            f"states; max |value difference| {value_gap:.1e}"
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--states", type=int, default=60)
     parser.add_argument("--airframe", default="uh60a_class")
+    parser.add_argument("--method", choices=("verified", "paper", "both"), default="both")
+    parser.add_argument("--baseline", action="store_true", help="also run the configuration before issue 13")
     arguments = parser.parse_args()
     airframe = load_airframe(arguments.airframe)
     points = _serpentine_grid(arguments.states)
+    print(f"command: {' '.join(sys.argv)}")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; {len(points)} states")
-    for method in ("verified", "paper"):
-        settings = load_settings(method=method)
-        started = time.perf_counter()
-        planner = get_planner(airframe, settings)
-        build_s = time.perf_counter() - started
-        cold, warm_near, warm_far, replay, statuses = [], [], [], [], {}
-        previous = None
-        for height_ft, speed_kt in points:
-            state = initial_state_after_failure(airframe, height_ft * FT, speed_kt * KT)
-            started = time.perf_counter()
-            cold_plan = planner.plan(state)
-            total_ms = 1e3 * (time.perf_counter() - started)
-            cold.append(cold_plan.solver.solve_time_ms)
-            replay.append(total_ms - cold_plan.solver.solve_time_ms)
-            nearby = initial_state_after_failure(airframe, (height_ft + 10.0) * FT, (speed_kt + 2.5) * KT)
-            warm_near.append(planner.plan(nearby, warm_start=cold_plan.warm_start).solver.solve_time_ms)
-            if previous is not None:
-                warm_far.append(planner.plan(state, warm_start=previous.warm_start).solver.solve_time_ms)
-            previous = cold_plan
-            statuses[cold_plan.status] = statuses.get(cold_plan.status, 0) + 1
-        print(f"\nmethod {method}: NLP built in {build_s:.2f} s; statuses {statuses}")
-        print(f"  cold solve        {_percentiles(cold)}")
-        print(f"  warm, half a cell {_percentiles(warm_near)}   (from a plan 10 ft / 2.5 kt away)")
-        print(f"  warm, far         {_percentiles(warm_far)}   (from the previous serpentine state's plan)")
-        print(f"  replay + decode   {_percentiles(replay)}")
+    print(f"load average before: {load_average()}")
+    methods = ("verified", "paper") if arguments.method == "both" else (arguments.method,)
+    for method in methods:
+        _run_method(airframe, method, points, arguments.baseline)
+    print(f"\nload average after: {load_average()}")
 
 
 if __name__ == "__main__":

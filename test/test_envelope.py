@@ -443,12 +443,12 @@ def test_range_and_list_parsing():
 
 def test_cli_query_json(small_file):
     result = run_cli("envelope", "query", str(small_file), "--height-ft", "200", "--speed-kt", "0", "--json")
-    assert result.returncode == 0, result.stderr
+    assert result.returncode == 1, result.stderr  # not safe, like helireach plan
     answer = json.loads(result.stdout)
     assert answer["status"] == "unsafe" and answer["value"] > 0 and answer["margin"] < 0
-    outside = json.loads(run_cli("envelope", "query", str(small_file), "--height-ft", "900", "--speed-kt", "0",
-                                 "--json").stdout)  # fmt: skip
-    assert outside["status"] == "outside" and outside["margin"] is None
+    outside_run = run_cli("envelope", "query", str(small_file), "--height-ft", "900", "--speed-kt", "0", "--json")
+    outside = json.loads(outside_run.stdout)
+    assert outside["status"] == "outside" and outside["margin"] is None and outside_run.returncode == 1
     text = run_cli("envelope", "query", str(small_file), "--height-ft", "600", "--speed-kt", "60")
     assert text.returncode == 0 and "safe" in text.stdout
 
@@ -473,3 +473,27 @@ def test_plot_writes_the_diagram_with_a_track(small, tmp_path):
     assert polygons and segments
     cli = run_cli("envelope", "plot", str(tmp_path / "missing.npz"), "--out", str(tmp_path / "x.png"))
     assert cli.returncode == 2 and not (tmp_path / "x.png").exists()
+
+
+def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airframe, settings):
+    """Issue 13: the sweep no longer restarts cold after every not-safe node; the classification is unchanged.
+
+    A grid through the hover unsafe band (50 ft steps) has nodes deep inside the band, whose warm answers
+    from the unsafe node below are kept, and nodes near its edges, which are solved cold as before.
+    """
+    heights, speeds = parse_range("0:400:9", FT), parse_range("0:10:2", KT)
+    current = compute_envelope(EnvelopeJob(airframe, settings, 0.0, heights, speeds))
+    legacy = compute_envelope(EnvelopeJob(airframe, settings, 0.0, heights, speeds, legacy_sweep=True))
+    assert np.any(current.status == "unsafe") and np.any(current.status == "safe")
+    assert np.array_equal(current.status, legacy.status)
+    new, old = current.metadata["compute"]["counters"], legacy.metadata["compute"]["counters"]
+    assert new["sweep_warm_from_not_safe"] > 0 and old["sweep_warm_from_not_safe"] == 0
+    cold = {
+        name: counters["sweep_solves"] - counters["sweep_warm_solves"] + counters["sweep_guesses_replaced_cold"]
+        for name, counters in (("current", new), ("legacy", old))
+    }
+    assert cold["current"] < cold["legacy"], (cold, new, old)
+    kept = current.arrays["warm_from_not_safe"]
+    assert np.all(current.status[kept] == "unsafe") and np.all(current.value[kept] >= 0.25)
+    assert current.metadata["refinement"]["sweep"] == "warm through not-safe nodes"
+    assert {"sweep", "boundary"} <= set(current.metadata["compute"]["phase_ipopt_s"])

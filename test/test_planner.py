@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.airframe import ConfigError, load_airframe
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import WarmStart, get_planner, plan_landing
 from helireach_ros.core.settings import PlannerSettings
@@ -127,3 +127,41 @@ def test_warm_start_from_another_nlp_is_refused(uh60, cruise_plan):
         paper_planner.plan(cruise_plan.initial_state, warm_start=cruise_plan.warm_start)
     with pytest.raises(ValueError, match="another NLP"):
         plan_landing(cruise_plan.initial_state, uh60, warm_start=WarmStart(np.zeros(3), np.zeros(3), np.zeros(1)))
+
+
+def test_warm_solver_options_keep_answers_and_save_iterations(uh60):
+    """Issue 13: warm_start_bound_push 1e-9 and bound_push/bound_frac 1e-8 on the warm solver only.
+
+    From the same neighbour plans, the new options give the same statuses and values (|ΔJ| ≤ 1e-5) as the
+    options before issue 13 in fewer IPOPT iterations in total; cold solves are untouched by them.
+    """
+    current = PlannerSettings()
+    before = current.replace(warm_start_bound_push=1e-6, warm_bound_push=1e-2)
+    assert (current.warm_start_bound_push, current.warm_bound_push) == (1e-9, 1e-8)
+    planner, old_planner = get_planner(uh60, current), get_planner(uh60, before)
+    iterations = {"current": 0, "before": 0}
+    statuses = set()
+    for height_ft, speed_kt in ((500, 75), (200, 5), (700, 20), (100, 110)):
+        start = planner.plan(initial_state_after_failure(uh60, height_ft * FT, speed_kt * KT))
+        cold_before = old_planner.plan(initial_state_after_failure(uh60, height_ft * FT, speed_kt * KT))
+        assert cold_before.value == start.value and cold_before.solver.iterations == start.solver.iterations
+        target = initial_state_after_failure(uh60, (height_ft + 10) * FT, (speed_kt + 2.5) * KT)
+        new, old = (
+            planner.plan(target, warm_start=start.warm_start),
+            old_planner.plan(target, warm_start=start.warm_start),
+        )
+        assert new.solver.success and old.solver.success
+        assert new.status == old.status, (height_ft, speed_kt)
+        assert new.value == pytest.approx(old.value, abs=1e-5), (height_ft, speed_kt)
+        iterations["current"] += new.solver.iterations
+        iterations["before"] += old.solver.iterations
+        statuses.add(new.status)
+    assert statuses == {"safe", "unsafe"}  # both verdicts are covered
+    assert iterations["current"] < iterations["before"], iterations
+
+
+def test_warm_solver_options_are_validated():
+    with pytest.raises(ConfigError, match="warm_start_bound_push"):
+        PlannerSettings(warm_start_bound_push=0.0)
+    with pytest.raises(ConfigError, match="warm_bound_push"):
+        PlannerSettings(warm_bound_push=float("nan"))

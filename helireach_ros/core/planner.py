@@ -9,6 +9,7 @@ warm-start the next solve.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from dataclasses import dataclass, field
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.transcription.base import SUCCESS_STATUSES, Transcription, terminal_cost
@@ -37,6 +39,8 @@ __all__ = [
 ]
 
 STATUSES = ("safe", "unsafe", "unverified", "failed")
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -182,14 +186,20 @@ def _validate_state(state: np.ndarray, airframe: Airframe) -> None:
 class LandingPlanner:
     """Owns the NLP and solvers for one (airframe, settings); thread-safe, one solve at a time."""
 
-    def __init__(self, airframe: Airframe, settings: PlannerSettings) -> None:
+    def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
         self.airframe = airframe
         self.settings = settings
         started = time.perf_counter()
         scheme = VerifiedTranscription if settings.method == "verified" else PaperTranscription
-        self.transcription: Transcription = scheme(airframe, settings)
+        self.transcription: Transcription = scheme(airframe, settings, codegen)
         self.build_time_s = time.perf_counter() - started
         self._lock = threading.Lock()
+        log.info("landing NLP (%s) built in %.2f s on %s", settings.method, self.build_time_s, self.nlp_functions)
+
+    @property
+    def nlp_functions(self) -> str:
+        """Which NLP functions the solvers use: compiled (the library's path) or plain, and why."""
+        return self.transcription.nlp_functions
 
     def plan(self, state: HelicopterState | np.ndarray, warm_start: WarmStart | None = None) -> LandingPlan:
         """Solves, replays and classifies a landing from ``state``.
@@ -268,10 +278,20 @@ class LandingPlanner:
         )
 
 
+def get_planner(
+    airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None
+) -> LandingPlanner:
+    """The cached planner for an (airframe, settings) pair: the NLP is built once per process.
+
+    ``codegen`` (performance only) defaults to :meth:`CodegenSettings.from_environment`: compiled NLP
+    functions when the cache holds them, otherwise the plain ones.
+    """
+    return _cached_planner(airframe, settings, codegen or CodegenSettings.from_environment())
+
+
 @lru_cache(maxsize=16)
-def get_planner(airframe: Airframe, settings: PlannerSettings) -> LandingPlanner:
-    """The cached planner for an (airframe, settings) pair: the NLP is built once per process."""
-    return LandingPlanner(airframe, settings)
+def _cached_planner(airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings) -> LandingPlanner:
+    return LandingPlanner(airframe, settings, codegen)
 
 
 def plan_landing(

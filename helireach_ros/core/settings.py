@@ -36,6 +36,12 @@ class PlannerSettings:
         paper_time_scale: paper: c in s = c log(2 / (1 − τ)), s.
         tolerance: IPOPT ``tol``.
         max_iterations: IPOPT ``max_iter``.
+        warm_start_bound_push: warm-started solves only: IPOPT ``warm_start_bound_push`` and
+            ``warm_start_mult_bound_push`` (how far the start point and its bound multipliers are moved
+            off the bounds). A neighbour's solution is already interior; a small push keeps it (measured:
+            8 instead of 10 iterations, the same classification).
+        warm_bound_push: warm-started solves only: IPOPT ``bound_push`` and ``bound_frac``. Cold solves keep
+            IPOPT's defaults (0.01): these small values slow them down.
         replay_relative_tolerance: CVODES relative tolerance of the independent replay.
         replay_samples_per_interval: replay output points per control interval.
         rotor_speed_backoff: the NLP keeps Ω this fraction of Ω₀ inside its limits at the collocation
@@ -56,6 +62,8 @@ class PlannerSettings:
     paper_time_scale: float = 3.0
     tolerance: float = 1e-7
     max_iterations: int = 300
+    warm_start_bound_push: float = 1e-9
+    warm_bound_push: float = 1e-8
     replay_relative_tolerance: float = 1e-8
     replay_samples_per_interval: int = 8
     rotor_speed_backoff: float = 0.01
@@ -82,6 +90,8 @@ class PlannerSettings:
             ("smoothness_weight", 0.0, 1.0),
             ("paper_time_scale", 0.1, 100.0),
             ("tolerance", 1e-12, 1e-2),
+            ("warm_start_bound_push", 1e-12, 0.5),
+            ("warm_bound_push", 1e-12, 0.5),
             ("replay_relative_tolerance", 1e-12, 1e-3),
             ("rotor_speed_backoff", 0.0, 0.1),
             ("rotor_speed_replay_margin", 0.0, 0.1),

@@ -5,12 +5,20 @@ engine fails (:func:`~helireach_ros.core.model.initial_state_after_failure`); th
 whether a safe landing is reachable from there. The work runs in three phases:
 
 1. **Sweep.** One task per speed column, heights ascending. The first node is solved cold; each
-   next node is warm-started from the previous node's plan if that plan was ``safe`` (a warm start
-   from an unsafe plan could drag the next node into the same crash), otherwise cold.
+   next node is warm-started from the previous node's plan, whatever its status (a failed node has
+   no plan: the next one is cold). A start from a plan that is not ``safe`` is only a guess, made
+   after an ``unsafe`` node of value ≥ ``GUESS_MIN_PREVIOUS_VALUE`` (otherwise the node is solved
+   cold, as before issue 13): it is kept (``warm_from_not_safe``) when it answers ``unsafe`` with a
+   value of at least ``NEAR_ZERO_VALUE`` (deep inside an unsafe band, where it saves the cold solve:
+   a warm solve costs ~1/3 of a cold one); any other answer is replaced by a cold solve at once,
+   since the re-check would need it and a false ``unsafe`` must not start the next node.
 2. **Cold re-check.** Every warm-started node whose value is near 0 (``|J| < NEAR_ZERO_VALUE``) or
    whose status differs from a 4-neighbour is solved again cold (:func:`_checked`): ``unsafe`` from
    either start wins, otherwise the cold answer decides — such a node is ``safe`` only with a
-   verified cold plan, so a warm start never carries an optimistic answer across the boundary.
+   verified cold plan, so a warm start never carries an optimistic answer across the boundary. For
+   a node started from a not-safe plan the cold answer decides alone (what the sweep before issue 13
+   computed there). A node warm-started from a safe plan that answered ``unsafe`` is not re-solved:
+   ``unsafe`` wins whatever the cold answer, so that solve cannot change the verdict.
    Repeated until no such node is left unchecked.
 3. **Boundary refinement.** On every grid line between a safe and an unsafe node, the boundary is
    located to within ``2 ft`` / ``1 kt`` by regula falsi on the value (bisection as a safeguard),
@@ -40,7 +48,7 @@ import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -70,6 +78,9 @@ __all__ = [
     "compute_envelope",
 ]
 
+if TYPE_CHECKING:
+    from helireach_ros.core.compiled_nlp import CodegenSettings
+
 log = logging.getLogger(__name__)
 
 NEAR_ZERO_VALUE = 0.25
@@ -78,10 +89,13 @@ HEIGHT_TOLERANCE = 2.0 * FT
 """Boundary refinement along a height line stops when the bracket is this narrow, m."""
 SPEED_TOLERANCE = 1.0 * KT
 """Boundary refinement along a speed line stops when the bracket is this narrow, m/s."""
-BOUND_MULTIPLIER_FLOOR = 1e-6
-"""Stored bound multipliers smaller than this are stored as 0: IPOPT's warm start raises every bound multiplier
-to ``warm_start_mult_bound_push`` (1e-6 in :mod:`helireach_ros.core.transcription.base`) anyway, so the warm start is
-unchanged (checked: bit-identical solutions), and the zeros compress (the shipped file shrinks by ~1/4)."""
+GUESS_MIN_PREVIOUS_VALUE = 0.35
+"""The sweep warm-starts the node above an unsafe node from its plan only if that node's value is at least
+this; below it the next node is close to the band's edge and solved cold at once (measured on the shipped
+grid: after the 53 unsafe nodes below 0.35, 1 warm answer would have been kept; after the 177 above, 165)."""
+EXTRA_NODE_ARRAY = "warm_from_not_safe"
+"""An array beyond the file format's required ones: nodes whose sweep solve started from a not-safe plan
+(needed to resume exactly; a file without it reads as all False)."""
 CHECKPOINT_INTERVAL_S = 60.0
 """A long computation saves a partial file this often (and always on Ctrl-C)."""
 
@@ -106,6 +120,12 @@ class EnvelopeJob:
     power_fraction: float
     heights: tuple[float, ...]
     speeds: tuple[float, ...]
+    codegen: CodegenSettings | None = None
+    """Compiled NLP functions or not (performance only, not recorded; None: the worker's environment)."""
+    legacy_sweep: bool = False
+    """The sweep before issue 13: cold restart after every not-safe node and a cold re-check of every
+    candidate. Same classification, more cold solves; kept for same-run comparisons (``bench/envelope_throughput.py
+    --baseline``)."""
 
     def __post_init__(self) -> None:
         for name, axis in (("heights", self.heights), ("speeds", self.speeds)):
@@ -134,6 +154,10 @@ class _Solution:
     control_times: np.ndarray | None = None
     control_values: np.ndarray | None = None
     control_interpolation: str = ""
+    warm_from_not_safe: bool = False
+    point_time_ms: float = 0.0  # solve + decode + replay in the task (phase accounting; not stored)
+    point_cpu_ms: float = 0.0  # the same in CPU time of the worker (less sensitive to other load; not stored)
+    discarded_solve_ms: float = 0.0  # IPOPT time of a warm guess replaced by this cold solve (not stored)
 
     @property
     def conservatism(self) -> tuple[int, float]:
@@ -155,7 +179,12 @@ def _checked(warm: _Solution, cold: _Solution) -> _Solution:
     say a landing is reachable and the cold plan is independently verified, so ``safe`` is proven.
     (Warm plans that ride the rotor-speed limit overshoot it between collocation points in the
     replay more often than cold ones; the strict rule marked ~30 such proven-safe nodes unverified.)
+
+    A warm answer started from a not-safe plan (``warm_from_not_safe``) is a guess: the cold answer
+    decides alone, exactly as if the sweep had solved the node cold.
     """
+    if warm.warm_from_not_safe:
+        return cold
     if warm.status == _UNSAFE or cold.status == _UNSAFE:
         return _more_conservative(cold, warm)
     if cold.status == _SAFE:
@@ -181,9 +210,10 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
     from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import get_planner
 
+    started, started_cpu = time.perf_counter(), time.process_time()
     try:
         state = initial_state_after_failure(job.airframe, height, speed, job.power_fraction)
-        plan = get_planner(job.airframe, job.settings).plan(state, warm_start=warm_start)
+        plan = get_planner(job.airframe, job.settings, job.codegen).plan(state, warm_start=warm_start)
     except (ValueError, RuntimeError) as error:  # e.g. no level trim below the stall limit
         log.debug("solve at h=%.2f m, V=%.2f m/s failed: %s", height, speed, error)
         return _Solution(_FAILED, math.nan, math.nan, math.nan, False, -1, 0.0, warm_start is not None)
@@ -198,17 +228,26 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
         solve_time_ms=plan.solver.solve_time_ms,
         warm_started=plan.solver.warm_started,
         primal=plan.warm_start.primal.astype(np.float32),
-        bound_multipliers=_stored_bound_multipliers(plan.warm_start.bound_multipliers),
+        bound_multipliers=_stored_bound_multipliers(
+            plan.warm_start.bound_multipliers, job.settings.warm_start_bound_push
+        ),
         constraint_multipliers=plan.warm_start.constraint_multipliers.astype(np.float32),
         control_times=plan.control_times.astype(np.float32),
         control_values=plan.control_values.astype(np.float32),
         control_interpolation=plan.control_interpolation,
+        point_time_ms=1e3 * (time.perf_counter() - started),
+        point_cpu_ms=1e3 * (time.process_time() - started_cpu),
     )
 
 
-def _stored_bound_multipliers(multipliers: np.ndarray) -> np.ndarray:
+def _stored_bound_multipliers(multipliers: np.ndarray, floor: float) -> np.ndarray:
+    """float32 multipliers, those below ``floor`` as 0.
+
+    IPOPT's warm start raises every bound multiplier to ``warm_start_mult_bound_push`` (the settings'
+    ``warm_start_bound_push``, passed as ``floor``) anyway, so the warm start is unchanged, and the zeros compress.
+    """
     stored = multipliers.astype(np.float32)
-    stored[np.abs(stored) < BOUND_MULTIPLIER_FLOOR] = 0.0
+    stored[np.abs(stored) < floor] = 0.0
     return stored
 
 
@@ -216,14 +255,34 @@ def _stored_bound_multipliers(multipliers: np.ndarray) -> np.ndarray:
 
 
 def _sweep_column(job: EnvelopeJob, column: int) -> tuple[str, int, list[_Solution]]:
-    """Phase 1: one speed column, heights ascending, warm-started from the previous node when it was safe."""
+    """Phase 1: one speed column, heights ascending, each node warm-started from the previous node's plan.
+
+    A start from a plan that is not safe is marked ``warm_from_not_safe`` (see :func:`_checked`); with
+    ``job.legacy_sweep``, or after an unverified, failed or nearly safe unsafe node, the node is solved cold.
+    """
     speed = job.speeds[column]
     solutions: list[_Solution] = []
-    warm_start = None
+    warm_start, previous_safe = None, True
     for height in job.heights:
         solution = _solve_point(job, height, speed, warm_start)
+        if warm_start is not None and not previous_safe:
+            if solution.status == _UNSAFE and solution.value >= NEAR_ZERO_VALUE:
+                solution = dataclasses.replace(solution, warm_from_not_safe=True)
+            else:
+                # near the boundary (or safe, or failed) the re-check would solve it cold anyway, and a false
+                # "unsafe" must not be the start of the next node: solve cold now, as the legacy sweep did
+                guess = solution
+                solution = _solve_point(job, height, speed)
+                solution = dataclasses.replace(
+                    solution,
+                    discarded_solve_ms=guess.solve_time_ms,
+                    point_time_ms=solution.point_time_ms + guess.point_time_ms,
+                    point_cpu_ms=solution.point_cpu_ms + guess.point_cpu_ms,
+                )
         solutions.append(solution)
-        warm_start = _warm_start_of(solution) if solution.status == _SAFE else None
+        previous_safe = solution.status == _SAFE
+        worth_a_guess = solution.status == _UNSAFE and solution.value >= GUESS_MIN_PREVIOUS_VALUE
+        warm_start = _warm_start_of(solution) if previous_safe or (worth_a_guess and not job.legacy_sweep) else None
     return "sweep", column, solutions
 
 
@@ -239,6 +298,9 @@ class _BoundaryPoint:
     unsafe_point: tuple[float, float]  # the first point found not safe
     solves: int
     cold_solves: int
+    solver_ms: float = 0.0  # IPOPT time of its solves (phase accounting; not stored)
+    point_time_ms: float = 0.0  # solve + decode + replay time of its solves
+    point_cpu_ms: float = 0.0  # the same in CPU time
 
 
 def _next_trial(
@@ -285,16 +347,25 @@ def _bisect_edge(
     other_end, other = axis[row1 if along_height else column1], other_value
     confirm_each = False
     solves = cold_solves = 0
+    spent = [0.0, 0.0, 0.0]  # IPOPT ms, solve + replay ms, solve + replay CPU ms
+
+    def solve(position: float, warm_start=None) -> _Solution:
+        answer = _solve_point(job, *point(position), warm_start)
+        spent[0] += answer.solve_time_ms
+        spent[1] += answer.point_time_ms
+        spent[2] += answer.point_cpu_ms
+        return answer
+
     while True:
         bisect = False
         while abs(other_end - safe_end[0]) > tolerance:
             width = abs(other_end - safe_end[0])
             trial = _next_trial(safe_end[0], safe_end[1], other_end, other, tolerance, bisect)
-            answer = _solve_point(job, *point(trial), safe_end[2])
+            answer = solve(trial, safe_end[2])
             solves += 1
             if answer.status == _SAFE and (confirm_each or safe_end[2] is None):
                 if safe_end[2] is not None:
-                    answer = _checked(answer, _solve_point(job, *point(trial)))
+                    answer = _checked(answer, solve(trial))
                     solves += 1
                     cold_solves += 1
                 if answer.status == _SAFE:
@@ -306,14 +377,14 @@ def _bisect_edge(
             bisect = abs(other_end - safe_end[0]) > 0.5 * width  # a poor guess: bisect next
         if safe_end[0] == confirmed[0]:
             break
-        cold = _solve_point(job, *point(safe_end[0]))
+        cold = solve(safe_end[0])
         solves += 1
         cold_solves += 1
         if cold.status == _SAFE:
             break
         other_end, other = safe_end[0], cold.value
         safe_end, confirm_each = confirmed, True
-    boundary = _BoundaryPoint(edge, point(safe_end[0]), point(other_end), solves, cold_solves)
+    boundary = _BoundaryPoint(edge, point(safe_end[0]), point(other_end), solves, cold_solves, *spent)
     return "boundary", edge, boundary
 
 
@@ -364,9 +435,18 @@ class _EnvelopeState:
         self.cold_checked = np.zeros(shape, bool)
         self.disagree = np.zeros(shape, bool)
         self.boundary: dict[tuple[int, int, int, int], _BoundaryPoint] = {}
-        self.counters = {"sweep_solves": 0, "sweep_warm_solves": 0, "cold_rechecks": 0, "bisection_solves": 0,
-                         "bisection_cold_solves": 0}  # fmt: skip
+        self.counters = dict.fromkeys(
+            ("sweep_solves", "sweep_warm_solves", "sweep_warm_from_not_safe", "sweep_guesses_replaced_cold",
+             "cold_rechecks", "cold_rechecks_of_not_safe_starts", "cold_rechecks_changed_status",
+             "rechecks_skipped_unsafe", "bisection_solves", "bisection_cold_solves"),
+            0,
+        )  # fmt: skip
         self.phase_seconds: dict[str, float] = {}
+        # per phase: IPOPT seconds and solve + decode + replay seconds summed over tasks (worker time)
+        self.phase_solver_seconds: dict[str, float] = {}
+        self.phase_point_seconds: dict[str, float] = {}
+        self.phase_cpu_seconds: dict[str, float] = {}
+        self.skipped_rechecks: set[tuple[int, int]] = set()
         self.previous_wall_time_s = 0.0
 
     # node access
@@ -382,12 +462,27 @@ class _EnvelopeState:
             values[row, column] = solution.value
         return values
 
+    def _account(self, phase: str, solver_ms: float, point_ms: float, cpu_ms: float) -> None:
+        for seconds, spent_ms in (
+            (self.phase_solver_seconds, solver_ms), (self.phase_point_seconds, point_ms),
+            (self.phase_cpu_seconds, cpu_ms),
+        ):  # fmt: skip
+            seconds[phase] = seconds.get(phase, 0.0) + spent_ms / 1e3
+
     def set_column(self, column: int, solutions: list[_Solution]) -> None:
         for row, solution in enumerate(solutions):
             self.solutions[(row, column)] = solution
             self.cold_checked[row, column] = not solution.warm_started
         self.counters["sweep_solves"] += len(solutions)
         self.counters["sweep_warm_solves"] += sum(solution.warm_started for solution in solutions)
+        self.counters["sweep_warm_from_not_safe"] += sum(solution.warm_from_not_safe for solution in solutions)
+        self.counters["sweep_guesses_replaced_cold"] += sum(solution.discarded_solve_ms > 0 for solution in solutions)
+        self._account(
+            "sweep",
+            sum(s.solve_time_ms + s.discarded_solve_ms for s in solutions),
+            sum(s.point_time_ms for s in solutions),
+            sum(s.point_cpu_ms for s in solutions),
+        )
 
     def merge_cold(self, cell: tuple[int, int], cold: _Solution) -> None:
         current = self.solutions[cell]
@@ -395,11 +490,15 @@ class _EnvelopeState:
         self.solutions[cell] = _checked(current, cold)
         self.cold_checked[cell] = True
         self.counters["cold_rechecks"] += 1
+        self.counters["cold_rechecks_of_not_safe_starts"] += current.warm_from_not_safe
+        self.counters["cold_rechecks_changed_status"] += self.solutions[cell].status != current.status
+        self._account("cold re-check", cold.solve_time_ms, cold.point_time_ms, cold.point_cpu_ms)
 
     def add_boundary(self, point: _BoundaryPoint) -> None:
         self.boundary[point.edge] = point
         self.counters["bisection_solves"] += point.solves
         self.counters["bisection_cold_solves"] += point.cold_solves
+        self._account("boundary", point.solver_ms, point.point_time_ms, point.point_cpu_ms)
 
     # conversion
     def to_envelope(self, metadata: dict[str, Any], complete: bool) -> Envelope:
@@ -416,6 +515,7 @@ class _EnvelopeState:
         scalar_fields = {
             "time_to_land": (float, np.nan), "replay_value": (float, np.nan), "verified": (bool, False),
             "iterations": (np.int32, -1), "solve_time_ms": (np.float32, np.nan), "warm_started": (bool, False),
+            EXTRA_NODE_ARRAY: (bool, False),
         }  # fmt: skip
         for name, (dtype, fill) in scalar_fields.items():
             array = np.full(shape, fill, dtype)
@@ -468,6 +568,7 @@ class _EnvelopeState:
                 control_times=arrays["plan_control_times"][cell].copy() if has_plan else None,
                 control_values=arrays["plan_control_values"][cell].copy() if has_plan else None,
                 control_interpolation=interpolation if has_plan else "",
+                warm_from_not_safe=bool(arrays[EXTRA_NODE_ARRAY][cell]) if EXTRA_NODE_ARRAY in arrays else False,
             )
         state.cold_checked = arrays["cold_checked"].copy()
         state.disagree = arrays["warm_cold_disagree"].copy()
@@ -527,6 +628,7 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
             "near_zero_value": NEAR_ZERO_VALUE,
             "height_tolerance_m": HEIGHT_TOLERANCE,
             "speed_tolerance_m_s": SPEED_TOLERANCE,
+            "sweep": "legacy (cold after not-safe nodes)" if job.legacy_sweep else "warm through not-safe nodes",
         },
         "software": {
             "helireach_ros": __version__,
@@ -553,6 +655,8 @@ def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
     Nodes whose own warm answer is not ``safe`` go first: when the cold solve turns such a lone
     unverified node safe, its safe neighbours no longer differ from it and need no re-check. The
     loop over rounds ends at the same condition either way: no unchecked node is near 0 or differs.
+    Unsafe answers warm-started from a safe plan are left out (their verdict cannot change, see
+    :func:`_checked`), except with ``legacy_sweep``.
     """
     codes, values = state.codes(), state.values()
     differs = np.zeros(state.shape, bool)
@@ -564,6 +668,15 @@ def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
     with np.errstate(invalid="ignore"):
         near_zero = np.abs(values) < NEAR_ZERO_VALUE
     candidates = (codes != PENDING) & ~state.cold_checked & (near_zero | differs)
+    if not state.job.legacy_sweep:
+        # unsafe from a warm start out of a safe plan wins over any cold answer (_checked): nothing to learn
+        verdict_fixed = np.zeros(state.shape, bool)
+        for cell, solution in state.solutions.items():
+            verdict_fixed[cell] = solution.status == _UNSAFE and not solution.warm_from_not_safe
+        skipped = candidates & verdict_fixed
+        state.skipped_rechecks.update((int(r), int(c)) for r, c in zip(*np.nonzero(skipped), strict=True))
+        state.counters["rechecks_skipped_unsafe"] = len(state.skipped_rechecks)
+        candidates &= ~verdict_fixed
     not_safe_first = candidates & (codes != _SAFE)
     if np.any(not_safe_first):
         candidates = not_safe_first
@@ -639,6 +752,10 @@ def compute_envelope(
         compute = {
             "wall_time_s": round(wall, 3),
             "phases_s": {k: round(v, 3) for k, v in state.phase_seconds.items()},
+            # summed over workers, this run only (a resumed run counts what it computed itself)
+            "phase_ipopt_s": {k: round(v, 3) for k, v in state.phase_solver_seconds.items()},
+            "phase_solve_and_replay_s": {k: round(v, 3) for k, v in state.phase_point_seconds.items()},
+            "phase_solve_and_replay_cpu_s": {k: round(v, 3) for k, v in state.phase_cpu_seconds.items()},
             "executor": executor.description,
             "counters": dict(state.counters),
             "nodes": math.prod(state.shape),

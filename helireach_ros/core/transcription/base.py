@@ -24,6 +24,7 @@ import casadi as ca
 import numpy as np
 
 from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.compiled_nlp import CodegenSettings, ipopt_solvers
 from helireach_ros.core.model import dynamics_function, trim_level_flight
 from helireach_ros.core.settings import PlannerSettings
 
@@ -78,10 +79,11 @@ class Transcription(ABC):
     """A landing NLP built once for an (airframe, settings) pair and solved for many initial states.
 
     The initial state is the NLP parameter. Subclasses define the decision vector, constraints,
-    cold initial guess and decoding; this class supplies scaling, bounds and the IPOPT solvers.
+    cold initial guess and decoding; this class supplies scaling, bounds and the IPOPT solvers (on compiled
+    NLP functions when the cache has them, :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which).
     """
 
-    def __init__(self, airframe: Airframe, settings: PlannerSettings) -> None:
+    def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
         self.airframe = airframe
         self.settings = settings
         self.dynamics = dynamics_function(airframe)
@@ -116,13 +118,16 @@ class Transcription(ABC):
         warm.update(
             {
                 "ipopt.warm_start_init_point": "yes",
-                "ipopt.warm_start_bound_push": 1e-6,
-                "ipopt.warm_start_mult_bound_push": 1e-6,
+                "ipopt.warm_start_bound_push": settings.warm_start_bound_push,
+                "ipopt.warm_start_mult_bound_push": settings.warm_start_bound_push,
+                # only here: a neighbour's solution is interior already; on a cold guess these slow IPOPT down
+                "ipopt.bound_push": settings.warm_bound_push,
+                "ipopt.bound_frac": settings.warm_bound_push,
                 "ipopt.mu_init": 1e-4,
             }
         )
-        self.cold_solver = ca.nlpsol("landing_cold", "ipopt", nlp, base)
-        self.warm_solver = ca.nlpsol("landing_warm", "ipopt", nlp, warm)
+        solvers, self.nlp_functions = ipopt_solvers(nlp, {"landing_cold": base, "landing_warm": warm}, codegen)
+        self.cold_solver, self.warm_solver = solvers["landing_cold"], solvers["landing_warm"]
 
     # -- to be provided by each scheme -------------------------------------------------------------
     @abstractmethod

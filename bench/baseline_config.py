@@ -1,0 +1,31 @@
+"""What the benches' ``--baseline`` runs: the planner configuration before issue 13, and the load line they print.
+
+Imported by the bench scripts (which run with ``bench/`` on ``sys.path``).
+"""
+
+from __future__ import annotations
+
+import os
+
+from helireach_ros.core.compiled_nlp import CodegenSettings
+from helireach_ros.core.settings import PlannerSettings
+
+__all__ = ["BEFORE_ISSUE_13", "baseline_codegen", "baseline_settings", "load_average"]
+
+BEFORE_ISSUE_13 = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2}
+"""The warm-solver options before issue 13 (``bound_push``/``bound_frac`` were IPOPT's defaults)."""
+
+
+def baseline_settings(settings: PlannerSettings) -> PlannerSettings:
+    """``settings`` with the warm-solver options before issue 13."""
+    return settings.replace(**BEFORE_ISSUE_13)
+
+
+def baseline_codegen() -> CodegenSettings:
+    """Plain CasADi functions, as before issue 13."""
+    return CodegenSettings(mode="off")
+
+
+def load_average() -> str:
+    """``os.getloadavg()`` as printed by the benches (1, 5 and 15 minutes)."""
+    return " ".join(f"{load:.2f}" for load in os.getloadavg())
