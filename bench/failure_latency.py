@@ -1,7 +1,7 @@
 """Failure message → landing trajectory on the wire: p50/p95 over many failures at different states.
 
 Run: .venv/bin/python bench/failure_latency.py [--failures 40] [--mode both|composed|cross-process] [--seed 1]
-     [--executor single_threaded|events|multi_threaded]
+     [--executor single_threaded|events] [--baseline]
 
 For each failure the bench streams a level-flight state (50 Hz odometry and rotor speed) at a seeded
 random (height, speed) over 50–800 ft × 0–115 kt (off the envelope grid, so the warm start is a
@@ -17,7 +17,13 @@ failure event → planner (warm start from the envelope, IPOPT, independent repl
 
 Closed-loop re-planning is off (``replan_period:=0``) so every failure starts from an idle planner, as
 a real failure would; the deadline stays at its default, and a flagged fallback published first is
-counted (and its own latency reported). Prints what it measured on this machine.
+counted (and its own latency reported). Between failures the flag is false for longer than the monitor's
+``recovery_hold`` (set to 0.2 s here), so each failure is a new episode, and the state is streamed long enough
+(``_SETTLE_S``) for a live verdict from it: with the default configuration (solver workers, live evaluation at
+5 Hz) the first trajectory of a failure from a safe state is the **standby** plan, then the **refined** plan
+from the state at the failure follows; both are timed. ``--baseline`` also runs, in the same run,
+``solver_workers:=0 live_rate:=0`` (the configuration before issue 10: solves on the node's thread, no
+standby). Prints what it measured on this machine, with the load average.
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
+from baseline_config import load_average
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -49,8 +56,9 @@ from helireach_ros.ros import messages as rm
 from helireach_ros.ros.bringup import build_system
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
-_NO_REPLANNING = ["-p", "helireach_planner:replan_period:=0.0"]
-_SETTLE_S = 0.15  # state streamed before each failure (the planner keeps only the latest)
+_NO_REPLANNING = ["-p", "helireach_planner:replan_period:=0.0", "-p", "helireach_monitor:recovery_hold:=0.2"]
+_BASELINE = ["-p", "helireach_planner:solver_workers:=0", "-p", "helireach_planner:live_rate:=0.0"]
+_SETTLE_S = 0.8  # flag false and the state streamed before each failure: episode ended (0.2 s), a live verdict
 _TIMEOUT_S = 10.0
 _NO_CONVERGENCE_S = 3.0  # after a fallback: give up waiting for a converged plan (the solve failed)
 
@@ -84,7 +92,7 @@ class Vehicle:
         self.stale = 0  # failures planned from a state older than the one streamed for them
 
     def spin_for(self, duration_s: float, state: tuple[float, float] | None = None) -> None:
-        """Spins, streaming ``state`` (height m, speed m/s) every 20 ms when given."""
+        """Spins, streaming ``state`` (height m, speed m/s) and a false failure flag every 20 ms when given."""
         deadline = time.perf_counter() + duration_s
         while time.perf_counter() < deadline:
             if state is not None:
@@ -92,6 +100,7 @@ class Vehicle:
                 self.stamps.add(stamp)
                 self.odometry.publish(rm.odometry_message(stamp, state[0], 0.0, state[1], 0.0))
                 self.rotor.publish(rm.rotor_message(stamp, 27.0))
+                self.failure.publish(Bool(data=False))
             self.executor.spin_once(timeout_sec=0.02)
 
     def wait_for_subscribers(self) -> None:
@@ -107,11 +116,10 @@ class Vehicle:
                 raise RuntimeError("the nodes never matched the bench (discovery failed?)")
             self.executor.spin_once(timeout_sec=0.05)
 
-    def fail(self, state: tuple[float, float]) -> tuple[float, float, bool]:
-        """One failure at a state: (ms to the first trajectory, ms to the first converged one, first was fallback)."""
+    def fail(self, state: tuple[float, float]) -> dict[str, float | str]:
+        """One failure at a state: ms to the first trajectory and its kind, ms to the refined (converged) plan."""
         self.stamps.clear()
-        self.spin_for(_SETTLE_S, state)
-        self.failure.publish(Bool(data=False))
+        self.spin_for(_SETTLE_S, state)  # ends the previous episode (recovery_hold) and lets a live verdict come
         self.arrivals.clear()
         self.statuses.clear()
         started = time.perf_counter()
@@ -120,20 +128,38 @@ class Vehicle:
         # The planner publishes each trajectory right before its status: the k-th of each belong together.
         while time.perf_counter() < deadline:
             self.executor.spin_once(timeout_sec=0.005)
-            # Re-planning is off, so whatever arrives after the flag answers it (possibly from a state the
-            # planner had not yet replaced by this failure's: counted as stale).
             mine = [t for t, _ in self.arrivals]
-            statuses = self.statuses
-            converged = [k for k, values in enumerate(statuses) if values.get("fallback") == "false" and k < len(mine)]
-            if converged:
-                values = statuses[converged[0]]
-                self.stale += int(values.get("state_stamp_ns", -1)) not in self.stamps
+            # statuses without a trajectory (the previous episode's "ended", a "none") are not paired
+            statuses = [values for values in self.statuses if values.get("status") not in ("ended", "none")]
+            statuses = statuses[: len(mine)]
+            if not statuses:
+                continue
+            first = statuses[0]
+            kind = "standby" if first.get("standby") == "true" else "fallback" if first["fallback"] == "true" else ""
+            refined = [
+                k
+                for k, values in enumerate(statuses)
+                if values["fallback"] == "false" and values.get("standby") != "true"
+            ]
+            if refined:
+                values = statuses[refined[0]]
+                # Re-planning is off, so whatever arrives after the flag answers it; a plan from a state not
+                # streamed for this failure (the previous failure's) is counted as stale.
+                self.stale += any(
+                    int(v.get("state_stamp_ns", -1)) not in self.stamps for v in statuses[: refined[0] + 1]
+                )
                 self.details.append(
                     (float(values["solve_time_ms"]), float(values["latency_ms"]), int(values["iterations"]))
                 )
-                return 1e3 * (mine[0] - started), 1e3 * (mine[converged[0]] - started), converged[0] > 0
-            if mine and statuses and time.perf_counter() > started + _NO_CONVERGENCE_S:
-                return 1e3 * (mine[0] - started), math.nan, True  # a fallback and no converged solve
+                return {
+                    "first": 1e3 * (mine[0] - started),
+                    "kind": kind or "refined",
+                    "refined": 1e3 * (mine[refined[0]] - started),
+                    "first_in_planner": float(first["latency_ms"]),
+                }
+            if kind != "standby" and time.perf_counter() > started + _NO_CONVERGENCE_S:
+                first_ms, in_planner = 1e3 * (mine[0] - started), float(first["latency_ms"])
+                return {"first": first_ms, "kind": kind, "refined": math.nan, "first_in_planner": in_planner}
         raise RuntimeError(f"no landing trajectory within {_TIMEOUT_S} s")
 
 
@@ -147,33 +173,34 @@ def _run(vehicle: Vehicle, states: list[tuple[float, float]]) -> dict[str, list]
     vehicle.fail(states[0])  # not counted: discovery of the reverse path and first-call costs
     vehicle.details.clear()
     vehicle.stale = 0
-    results: dict[str, list] = {"first": [], "converged": [], "fallback": []}
+    results: dict[str, list] = {"first": [], "kind": [], "refined": [], "first_in_planner": []}
     for state in states:
-        first, converged, fallback = vehicle.fail(state)
-        results["first"].append(first)
-        results["converged"].append(converged)
-        results["fallback"].append(fallback)
+        for key, value in vehicle.fail(state).items():
+            results[key].append(value)
     results["details"] = list(vehicle.details)
     results["stale"] = [vehicle.stale]
     return results
 
 
-def run_composed(states: list[tuple[float, float]], log_dir: str, executor: str) -> dict[str, list]:
+def run_composed(states: list[tuple[float, float]], log_dir: str, executor: str, extra: list[str]) -> dict[str, list]:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
-    system = build_system(log_dir=log_dir, ros_args=_NO_REPLANNING, context=Context(), executor=executor)
+    arguments = [*_NO_REPLANNING, *extra]
+    system = build_system(log_dir=log_dir, ros_args=arguments, context=Context(), executor=executor)
     try:
         return _run(Vehicle(system.context, system.executor), states)
     finally:
         system.shutdown()
 
 
-def run_cross_process(states: list[tuple[float, float]], log_dir: str, executor: str) -> dict[str, list]:
+def run_cross_process(
+    states: list[tuple[float, float]], log_dir: str, executor: str, extra: list[str]
+) -> dict[str, list]:
     environment = dict(os.environ, ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST", ROS_DOMAIN_ID=str(random.randint(1, 200)))
     os.environ.update(environment)
     child = subprocess.Popen(
         [
             *(sys.executable, "-m", "helireach_ros.cli.main", "bringup", "--log-dir", log_dir, "--executor", executor),
-            *("--ros-args", *_NO_REPLANNING),
+            *("--ros-args", *_NO_REPLANNING, *extra),
         ],
         env=environment,
         stdout=subprocess.PIPE,
@@ -182,42 +209,51 @@ def run_cross_process(states: list[tuple[float, float]], log_dir: str, executor:
     )
     context = Context()
     rclpy.init(context=context)
-    executor = SingleThreadedExecutor(context=context)
+    spinner = SingleThreadedExecutor(context=context)
     try:
         line = child.stdout.readline()  # "logging to ...": the child's nodes exist
         if "logging to" not in line:
             raise RuntimeError(f"helireach bringup did not start: {line!r}")
-        return _run(Vehicle(context, executor), states)
+        return _run(Vehicle(context, spinner), states)
     finally:
         child.terminate()
         child.wait(timeout=30)
-        executor.shutdown()
+        spinner.shutdown()
         rclpy.try_shutdown(context=context)
 
 
+def _percentiles(label: str, samples: list[float]) -> str:
+    data = np.asarray([sample for sample in samples if not math.isnan(sample)])
+    if not len(data):
+        return f"  {label:<36} none"
+    return (
+        f"  {label:<36} p50 {np.percentile(data, 50):6.1f} ms  p95 {np.percentile(data, 95):6.1f} ms  "
+        f"max {data.max():6.1f} ms  (n = {len(data)})"
+    )
+
+
 def _report(name: str, results: dict[str, list]) -> None:
-    first = np.asarray(results["first"])
-    converged = np.asarray(results["converged"])
-    fallbacks = int(np.sum(results["fallback"]))
-    print(f"\n{name}: {len(first)} failures")
+    first, kinds, refined = results["first"], results["kind"], results["refined"]
+    print(f"\n{name}: {len(first)} failures, load average {load_average()}")
+    print(_percentiles("failure -> first trajectory (any)", first))
+    print(_percentiles("  of which the standby plan", [t for t, k in zip(first, kinds, strict=True) if k == "standby"]))
+    print(_percentiles("  of which the refined plan", [t for t, k in zip(first, kinds, strict=True) if k == "refined"]))
     print(
-        f"  failure -> first trajectory    p50 {np.percentile(first, 50):6.1f} ms  p95 {np.percentile(first, 95):6.1f} "
-        f"ms  max {first.max():6.1f} ms  mean {first.mean():6.1f} ms"
+        _percentiles("  of which a flagged fallback", [t for t, k in zip(first, kinds, strict=True) if k == "fallback"])
     )
-    print(
-        f"  failure -> converged plan      p50 {np.percentile(converged, 50):6.1f} ms  p95 "
-        f"{np.percentile(converged, 95):6.1f} ms  max {converged.max():6.1f} ms"
-    )
-    print(f"  first message was a flagged fallback (deadline missed or solve failed): {fallbacks} of {len(first)}")
+    in_planner = [t for t, k in zip(results["first_in_planner"], kinds, strict=True) if k == "standby"]
+    print(_percentiles("  standby: event -> publish in planner", in_planner))
+    print(_percentiles("failure -> refined (converged) plan", refined))
+    counts = {kind: kinds.count(kind) for kind in ("standby", "refined", "fallback")}
+    print(f"  first trajectory was: {counts} (no standby: no safe live verdict at that state, or none yet)")
     print(f"  planned from the previous failure's state (state not yet received): {results['stale'][0]}")
+    if not results["details"]:
+        return
     solve, planner, iterations = (np.asarray(column) for column in zip(*results["details"], strict=True))
     print(
-        f"  of which IPOPT                 p50 {np.percentile(solve, 50):6.1f} ms  p95 {np.percentile(solve, 95):6.1f} "
-        f"ms  (iterations p50 {np.percentile(iterations, 50):.0f}, p95 {np.percentile(iterations, 95):.0f})"
-    )
-    print(
-        f"  planner event -> publish       p50 {np.percentile(planner, 50):6.1f} ms  p95 "
-        f"{np.percentile(planner, 95):6.1f} ms  (solve + replay + messages)"
+        f"  refined plan: IPOPT p50 {np.percentile(solve, 50):6.1f} ms  p95 {np.percentile(solve, 95):6.1f} "
+        f"ms  (iterations p50 {np.percentile(iterations, 50):.0f}, p95 {np.percentile(iterations, 95):.0f}); "
+        f"planner event -> publish p50 {np.percentile(planner, 50):6.1f} ms  p95 {np.percentile(planner, 95):6.1f} ms"
     )
 
 
@@ -227,19 +263,30 @@ def main() -> None:
     parser.add_argument("--mode", choices=("both", "composed", "cross-process"), default="both")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="the system's executor")
+    parser.add_argument("--baseline", action="store_true", help="also run solver_workers:=0 live_rate:=0 (before)")
     arguments = parser.parse_args()
     states = _states(arguments.failures, arguments.seed)
     print(
         f"helireach failure latency: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-        f"Python {platform.python_version()}, {arguments.failures} failures, seed {arguments.seed}"
+        f"Python {platform.python_version()}, {arguments.failures} failures, seed {arguments.seed}, "
+        f"load average {load_average()}"
     )
+    print(f"command: {' '.join([Path(sys.executable).name, *sys.argv])}")
+    configurations = [("solver workers + live evaluation (defaults)", [])]
+    if arguments.baseline:
+        configurations.append(("baseline: solver_workers:=0 live_rate:=0", _BASELINE))
+    runners = []
+    if arguments.mode in ("both", "composed"):
+        runners.append((f"composed (one process, {arguments.executor} executor)", run_composed))
+    if arguments.mode in ("both", "cross-process"):
+        runners.append(
+            (f"cross-process (helireach bringup in a child process, {arguments.executor})", run_cross_process)
+        )
     with tempfile.TemporaryDirectory() as log_dir:
-        if arguments.mode in ("both", "composed"):
-            results = run_composed(states, log_dir, arguments.executor)
-            _report(f"composed (one process, {arguments.executor} executor)", results)
-        if arguments.mode in ("both", "cross-process"):
-            results = run_cross_process(states, log_dir, arguments.executor)
-            _report(f"cross-process (helireach bringup in a child process, {arguments.executor} executor)", results)
+        for runner_name, runner in runners:
+            for configuration_name, extra in configurations:
+                results = runner(states, log_dir, arguments.executor, extra)
+                _report(f"{runner_name}, {configuration_name}", results)
     print(
         f"\nstates: {Path(__file__).name} --seed {arguments.seed}: 50-800 ft x 0-115 kt, level flight, total power loss"
     )

@@ -40,7 +40,9 @@ class DemoResult:
     Attributes:
         status_before_failure: the last safety verdict while cruising (level name, message) or None.
         touchdown: the vehicle's :class:`~helireach_ros.core.simulation.TouchdownReport` (None on timeout).
-        first_plan: the first published plan record (:class:`~helireach_ros.core.failure_episode.PublishedPlan`).
+        first_plan: the first published plan record (:class:`~helireach_ros.core.failure_episode.PublishedPlan`)
+            made after the failure (the standby plan is not it).
+        standby_plan: the standby plan record (the live plan published on the failure), or None.
         plans: every plan published for the failure.
         log_path: the MCAP log.
         message_count: messages recorded.
@@ -52,6 +54,7 @@ class DemoResult:
         self.status_before_failure: tuple[str, str] | None = None
         self.touchdown: Any = None
         self.first_plan: Any = None
+        self.standby_plan: Any = None
         self.plans: list[Any] = []
         self.replans_failed = 0
         self.log_path: Path | None = None
@@ -126,7 +129,9 @@ def run_demo(
             system.drain()
             result.touchdown = sim.touchdown
             result.plans = [record for record in planner.published_plans if record.failure_id == 1]
-            converged = [record for record in result.plans if not record.fallback]
+            standby = [record for record in result.plans if planner.is_standby(record)]
+            result.standby_plan = standby[0] if standby else None
+            converged = [record for record in result.plans if not record.fallback and not planner.is_standby(record)]
             result.first_plan = converged[0] if converged else (result.plans[0] if result.plans else None)
             result.track = np.array([[state[3], state[1]] for _, state in sim.vehicle.history])
             if hold and not system.stop_requested:
@@ -179,6 +184,11 @@ def summary(result: DemoResult) -> str:
             f"{plan.solver.solve_time_ms:.0f} ms / {plan.solver.iterations} iterations, failure to trajectory "
             f"{first.latency_ms:.0f} ms, land in {plan.time_to_land:.1f} s"
         )
+    if result.standby_plan is not None:
+        standby = result.standby_plan
+        verified = "verified" if standby.plan.verified else "NOT verified"
+        after = f"{standby.latency_ms:.0f} ms after the failure"
+        lines.append(f"  standby plan              : published {after}, {verified}")
     replans = max((record.replan_index for record in result.plans), default=0)
     lines.append(f"  closed loop               : {replans} re-plans from the current state")
     touchdown = result.touchdown

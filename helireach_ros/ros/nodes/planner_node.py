@@ -1,10 +1,45 @@
 """Planner node: on an engine failure, plan the landing, publish it, and keep re-planning down to the ground.
 
-Startup builds the NLP once (:func:`~helireach_ros.core.planner.get_planner`) and solves one warm-up landing
-so the first real solve pays no first-call costs. It loads the envelope (for warm starts and fallbacks)
-when it was computed for the same airframe, planner settings and total power loss.
+**Where solves run.** With ``solver_workers`` ≥ 1 (default 2) every solve (live evaluations, the failure's plan,
+re-plans) runs in a :class:`~helireach_ros.core.solver_pool.SolverPool` of worker processes, each holding the NLP
+(no GIL shared with the executor). Failure plans and re-plans go at ``PRIORITY_FAILURE`` with a timeout of
+``solve_timeout`` (default: ``deadline``, at least 1 s). A worker that dies fails its job at once (within the
+pool's 10 ms supervision tick), one that hangs after ``solve_timeout``; the node then falls back exactly as after a
+failed solve (and the deadline's fallback goes out after ``deadline`` whatever the worker does), the pool restarts
+the worker, and ``/diagnostics`` reports the restarts and the last error. The timeout is not the deadline itself:
+a solve that is merely slow (a loaded machine) must still be allowed to replace the deadline's fallback, as
+without a pool; live jobs get 4 × ``solve_timeout`` (the cold check may solve twice). Start-up waits (at most
+60 s) for one ready worker. With ``solver_workers`` = 0 the node builds the NLP itself
+(:func:`~helireach_ros.core.planner.get_planner`) and solves one warm-up landing at start-up. Either way it loads
+the envelope (for warm starts and fallbacks) when it was computed for the same airframe, planner settings and
+total power loss.
 
-On a failure event (``/helireach/failure_event``) the node takes the latest canonical state
+**Live reachability** (:mod:`helireach_ros.core.live_reachability`, ``live_rate`` Hz, 0 = off). Before any
+failure, at most one evaluation at a time: the latest valid state with a *measured* rotor speed
+(``current_state``, engine power = the rotor reading's measured torque × Ω if given, else 0), the engine assumed
+to fail now (``live_power_fraction`` of that power left), warm-started from the previous live solution (the
+first from the envelope's nearest stored plan), solved with the cold check (a warm plan that is not safe is
+solved again cold), replay-verified. Each verdict goes out on ``/helireach/live_reachability`` (latched
+``DiagnosticStatus``; OK only for a replay-verified safe plan). A state older than ``live_max_state_age`` is not
+evaluated; without a measured rotor speed nothing is evaluated (the answer would rest on an assumed Ω). Live
+evaluation pauses while a failure episode runs (a verdict still in flight is dropped) and starts afresh after
+ENDED or LANDED.
+
+**The standby plan.** On the failure, if the latest live verdict is replay-verified safe and its state is at
+most ``standby_max_age`` older than the failure, its plan is published at once, before the refined solve is
+submitted: a normal plan publication stamped with the verdict's own state stamp, ``standby=true`` in the plan
+status, text ``STANDBY: …``. It counts as the episode's first plan (no deadline fallback after it; the lateness
+rule applies to it as to any first plan). The refined plan from the state at the failure follows as below and
+replaces it (``standby=false``); if that solve fails the standby stays (it is verified) and the closed loop keeps
+trying.
+
+One failure episode (:mod:`helireach_ros.core.failure_episode`, run by the monitor) is one planning episode:
+it starts on the failure event (``/helireach/failure_event``, or the monitor's ``/helireach/failure_episode``
+state when the event was missed) and stops when that state says ENDED (engine recovered: a plan status
+``ended`` goes out, re-planning stops, nothing is called safe for it again) or LANDED. The first plan is
+flagged ``late`` when its state is stamped more than ``max_message_age`` after the failure.
+
+On a failure event the node takes the latest canonical state
 (``/helireach/state`` + ``/helireach/rotor_state``), solves warm-started from the envelope's nearest
 stored plan, and publishes the trajectory (``/helireach/landing_trajectory``), the predicted path
 (``/helireach/landing_path``) and the plan status (``/helireach/plan_status``), all latched, stamped
@@ -19,10 +54,11 @@ autorotation controls at the current speed). A later converged solve replaces it
 While the descent lasts (down to ``replan_min_height``, while the current plan has more than
 ``replan_min_remaining`` seconds to go) the node re-plans every ``replan_period`` seconds from the
 current state, warm-started from its previous plan (closed loop). A re-plan that fails keeps the
-current plan. Solves run on the node's own solver thread, one at a time (a re-plan is skipped while a
-solve is still running); callbacks only hand work to it. So whatever executor spins the node, even a
-single-threaded one, state reception, the deadline's fallback and status publishing go on during a
-solve (CasADi releases the GIL while IPOPT and CVODES run).
+current plan. Failure plans and re-plans run on the node's own solver thread, one at a time (a re-plan is
+skipped while a solve is still running); with a pool that thread only waits for the worker's answer.
+Callbacks only hand work to it (live jobs go to the pool directly, or to the solver thread without one). So
+whatever executor spins the node, even a single-threaded one, state reception, the deadline's fallback and
+status publishing go on during a solve.
 
 Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """
@@ -35,6 +71,7 @@ import threading
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeoutError
 from functools import partial
 from typing import Any
 
@@ -47,20 +84,37 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.failure_episode import FailureEpisode, PublishedPlan
+from helireach_ros.core.failure_episode import (
+    EpisodePhase,
+    EpisodeState,
+    FailureEpisode,
+    PlanLateness,
+    PublishedPlan,
+    episode_outcome,
+    episode_starts,
+    late_verdict,
+    plan_lateness,
+)
 from helireach_ros.core.fallback import FallbackPlan, fallback_plan
+from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict, solve_with_cold_check
 from helireach_ros.core.model import clip_rotor_speed_noise
 from helireach_ros.core.plan_verdict import plan_verdict
 from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
+from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.qos import QosWatch
 
 __all__ = ["LandingPlannerNode", "main"]
 
 _PLAN_HISTORY = 200  # published plans kept for inspection (demo, tests)
 _ROTOR_NOISE_TOLERANCE = 0.01  # fraction of Ω₀ a measured rotor speed may lie outside its limits as noise
+_POOL_READY_TIMEOUT_S = 60.0  # start-up waits at most this long for one ready solver worker
+_MIN_SOLVE_TIMEOUT_S = 1.0  # the default solve_timeout: the deadline, but at least this
+_QUEUE_WAIT_S = 5.0  # a failure job no worker took within solve_timeout + this is withdrawn (all workers down)
+_LIVE_TIMEOUT_FACTOR = 4.0  # live job timeout = this × solve_timeout (the cold check may solve twice)
 
 
 class LandingPlannerNode(Node):
@@ -69,8 +123,10 @@ class LandingPlannerNode(Node):
     Parameters: ``airframe``, ``gross_weight`` (N, 0 = the airframe file's), ``density_altitude`` (m, NaN = the
     file's), ``planner_settings`` (file, '' = config/planner.yaml), ``envelope_file``
     ('' = the shipped one, ``none`` = no envelope), ``deadline`` (s), ``replan_period`` (s, 0 = off),
-    ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s),
-    ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``.
+    ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s), ``max_message_age`` (s),
+    ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``;
+    ``solver_workers`` (0 = solve in this process), ``solve_timeout`` (s, NaN = ``deadline``, ≥ 1 s); ``live_rate``
+    (Hz, 0 = off), ``live_power_fraction``, ``live_max_state_age`` (s), ``standby_max_age`` (s).
     """
 
     def __init__(self, **node_options: Any) -> None:
@@ -86,6 +142,9 @@ class LandingPlannerNode(Node):
             "replan_min_remaining", 0.3, "no re-planning when the plan has less time left, s", (0.0, 60.0)
         )
         self._state_timeout = declare("state_timeout", 0.5, "older states are not planned from, s", (0.01, 60.0))
+        self._max_message_age = declare(
+            "max_message_age", 1.0, "first plan from a state later after the failure = late, s", (0.001, 3600.0)
+        )
         self._assume_total_power_loss = declare(
             "assume_total_power_loss", True, "plan with zero engine power (else the measured power)"
         )
@@ -93,20 +152,63 @@ class LandingPlannerNode(Node):
         self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "frame of the landing path")
         self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "JointState joint of the main rotor")
         diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
+        solver_workers = declare("solver_workers", 2, "solver worker processes (0 = solve in this process)", (0, 16))
+        solve_timeout = declare(
+            "solve_timeout",
+            math.nan,
+            "a worker's failure plan not back this long = hung, s (NaN = deadline, at least 1 s)",
+            (0.001, 600.0),
+        )
+        # Not the deadline itself by default: a slow solve is not a hung one, and its plan must still replace the
+        # deadline's fallback (a dead worker is seen at once whatever the timeout).
+        self._solve_timeout = max(self._deadline, _MIN_SOLVE_TIMEOUT_S) if math.isnan(solve_timeout) else solve_timeout
+        live_rate = declare("live_rate", 5.0, "live evaluations before a failure, Hz (0 = off)", (0.0, 100.0))
+        live_power_fraction = declare(
+            "live_power_fraction", 0.0, "engine power left after the assumed failure, of the measured power", (0.0, 1.0)
+        )
+        live_max_state_age = declare(
+            "live_max_state_age", 0.3, "an older state is not evaluated live, s", (0.001, 60.0)
+        )
+        standby_max_age = declare(
+            "standby_max_age",
+            0.3,
+            "standby plan only from a state at most this much older than the failure, s",
+            (0.001, 60.0),
+        )
+        self._live_settings = (
+            LiveSettings(
+                rate_hz=live_rate,
+                power_fraction=live_power_fraction,
+                max_state_age_s=live_max_state_age,
+                standby_max_age_s=standby_max_age,
+            )
+            if live_rate > 0.0
+            else None
+        )
 
         self._lock = threading.Lock()  # latest state, failure bookkeeping
         self._publish_lock = threading.Lock()  # one plan decision/publication at a time
         self._odometry: tuple[rm.OdometryReading, int, str] | None = None
         self._rotor: tuple[rm.RotorReading, int] | None = None
         self._failure: FailureEpisode | None = None
+        self._episode = EpisodeState()  # the monitor's failure-episode state (no_flag until one arrives)
         self._failure_count = 0
         self.published_plans: list[PublishedPlan] = []
+        # Live evaluation: the evaluator and the job in flight, guarded by _live_lock. A generation number
+        # drops verdicts that come back after a failure started or after a reset.
+        self._live_lock = threading.Lock()
+        self._live = LiveEvaluator(self._live_settings) if self._live_settings is not None else None
+        self._live_job: Future | None = None
+        self._live_generation = 0
+        self._live_frame = rm.DEFAULT_BODY_FRAME  # vehicle frame of the standby verdict's state
+        self.standby_plans: list[PublishedPlan] = []  # the published standby records (see is_standby)
 
-        self.planner: Any | None = None
+        self.planner: Any | None = None  # the in-process LandingPlanner, or the SolverPool; None = not configured
+        self._pool: SolverPool | None = None
         self.envelope: Any | None = None
         self._setup_error = ""
         try:
-            self._setup_core(load_aircraft, settings_file, envelope_file, warm_up)
+            self._setup_core(load_aircraft, settings_file, envelope_file, warm_up, solver_workers)
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
@@ -126,19 +228,13 @@ class LandingPlannerNode(Node):
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
-        self.create_subscription(
-            Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
-        )
-        self.create_subscription(
-            JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS, **rm.NO_QOS_EVENTS_SUBSCRIPTION
-        )
-        self.create_subscription(
-            Header,
-            rm.TOPIC_FAILURE_EVENT,
-            self._on_failure_event,
-            rm.EVENT_QOS,
-            **rm.NO_QOS_EVENTS_SUBSCRIPTION,
-        )
+        # Inputs through a QosWatch: an incompatible publisher is an ERROR "<node>: QoS" on /diagnostics. The
+        # failure event stays RELIABLE (one message per failure must not be lost; a best-effort one is reported).
+        self._qos_watch = QosWatch(self, diagnostics_period)
+        self._qos_watch.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(Header, rm.TOPIC_FAILURE_EVENT, self._on_failure_event, rm.EVENT_QOS)
+        self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.EVENT_QOS)
         # A periodic check, never cancelled or reset from the solver thread (cancelling a timer that the
         # executor is about to fire raises inside the executor). Every half deadline:
         # the fallback goes out within 1.5 deadlines without waking the executor needlessly.
@@ -146,12 +242,22 @@ class LandingPlannerNode(Node):
         if self._replan_period > 0.0:
             self.create_timer(self._replan_period, self._on_replan_timer)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
+        self._live_publisher = self.create_publisher(
+            DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        if self._live_settings is not None:
+            self.create_timer(1.0 / self._live_settings.rate_hz, self._on_live_timer)
 
     # -- startup -----------------------------------------------------------------------------------------------
     def _setup_core(
-        self, load_aircraft: Callable[[], Any], settings_file: str, envelope_file: str, warm_up: bool
+        self,
+        load_aircraft: Callable[[], Any],
+        settings_file: str,
+        envelope_file: str,
+        warm_up: bool,
+        solver_workers: int,
     ) -> None:
-        """Loads airframe, settings and envelope, builds the NLP (once) and warms it up."""
+        """Loads airframe, settings and envelope; starts the solver pool, or builds the NLP here and warms it up."""
         from helireach_ros.core.model import initial_state_after_failure
         from helireach_ros.core.planner import get_planner
         from helireach_ros.core.settings import load_settings
@@ -161,19 +267,34 @@ class LandingPlannerNode(Node):
         # (one made for other conditions is refused: cold starts, autorotation-entry fallback).
         self.airframe = load_aircraft()
         self.settings = load_settings(settings_file or None)
-        self.planner = get_planner(self.airframe, self.settings)
         self.envelope, self._envelope_note = self._load_envelope(envelope_file)
         self.warm_up_ms = math.nan
-        if warm_up:
+        if solver_workers > 0:
+            # The workers build and warm up their own NLPs; the fallback needs airframe/settings/envelope only.
+            self._pool = SolverPool(
+                self.airframe,
+                self.settings,
+                SolverPoolSettings(workers=solver_workers, warm_up=warm_up, default_timeout_s=self._solve_timeout),
+            )
+            self.planner = self._pool
+            if not self._pool.wait_ready(_POOL_READY_TIMEOUT_S):
+                self.get_logger().error(
+                    f"no solver worker ready after {_POOL_READY_TIMEOUT_S:g} s (last error: "
+                    f"{self._pool.last_error or 'none'}): failures get fallbacks until one is"
+                )
+        else:
+            self.planner = get_planner(self.airframe, self.settings)
+        if warm_up and self._pool is None:
             state = initial_state_after_failure(self.airframe, 500.0 * FT, 75.0 * KT)
             stored = self.envelope.nearest_plan(state.height, state.forward_speed) if self.envelope else None
             warm_up_started = time.perf_counter()
             self.planner.plan(state, stored.warm_start if stored else None)
             self.warm_up_ms = 1e3 * (time.perf_counter() - warm_up_started)
         self.startup_s = time.perf_counter() - started
+        where = f"{solver_workers} solver workers" if self._pool is not None else "solving in this process"
         self.get_logger().info(
             f"planner ready for {self.airframe.name} ({self.settings.method}, {self.settings.intervals} intervals) "
-            f"in {self.startup_s:.2f} s; {self._envelope_note}"
+            f"in {self.startup_s:.2f} s, {where}; {self._envelope_note}"
         )
 
     def _load_envelope(self, path: str) -> tuple[Any | None, str]:
@@ -211,11 +332,14 @@ class LandingPlannerNode(Node):
         with self._lock:
             self._rotor = (reading, self._now_ns())
 
-    def current_state(self) -> tuple[np.ndarray, int, str, str] | None:
+    def current_state(self, measured_power: bool = False) -> tuple[np.ndarray, int, str, str] | None:
         """(state y, v, Ω, h, z, P; its stamp ns; vehicle frame; rotor-speed source), or None without a fresh state.
 
-        Without a fresh rotor speed Ω₀ is assumed (the source says so; re-plans are then skipped). Ω within
-        1 % of Ω₀ outside the rotor limits is clipped to them (sensor noise); farther out it is kept.
+        Without a fresh rotor speed Ω₀ is assumed (the source says so; re-plans and live evaluations are then
+        skipped). Ω within 1 % of Ω₀ outside the rotor limits is clipped to them (sensor noise); farther out it
+        is kept. P is 0 with ``assume_total_power_loss`` (plans after a failure), else the measured power (the
+        rotor reading's torque × Ω; 0 if not measured); ``measured_power`` always gives the measured power (live
+        evaluation applies ``live_power_fraction`` to it).
         """
         now_ns = self._now_ns()
         timeout_ns = self._state_timeout * 1e9
@@ -229,23 +353,206 @@ class LandingPlannerNode(Node):
             power = rotor[0].engine_power
         else:
             rotor_speed, source, power = self.airframe.nominal_rotor_speed, "assumed_nominal", None
-        if self._assume_total_power_loss or power is None:
+        if power is None or (self._assume_total_power_loss and not measured_power):
             power = 0.0
         rotor_speed = clip_rotor_speed_noise(self.airframe, rotor_speed, _ROTOR_NOISE_TOLERANCE)
         return rm.helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
 
     # -- the failure --------------------------------------------------------------------------------------------
     def _on_failure_event(self, message: Header) -> None:
+        self._start_failure(rm.stamp_nanoseconds(message.stamp))
+
+    def _on_episode(self, message: DiagnosticStatus) -> None:
+        """Follows the monitor's failure episode: starts a missed one, stops planning for an ended one."""
+        try:
+            state = EpisodeState.from_values(rm.status_values(message))
+        except ValueError as error:
+            self.get_logger().warning(f"unreadable failure episode ignored: {error}", throttle_duration_sec=5.0)
+            return
+        with self._lock:
+            self._episode = state
+            failure = self._failure
+        if episode_starts(state, failure.event_stamp_ns if failure is not None else None):
+            self._start_failure(state.started_ns)
+            return
+        outcome = episode_outcome(state, failure.event_stamp_ns) if failure is not None else None
+        if outcome is not None:
+            self._stop_failure(failure, outcome, state)
+
+    def _start_failure(self, failure_stamp_ns: int) -> None:
+        """Starts planning for the failure stamped ``failure_stamp_ns`` (once: its event and state both announce it)."""
         now_ns = self._now_ns()
         with self._lock:
+            if self._failure is not None and self._failure.event_stamp_ns == failure_stamp_ns:
+                return
             self._failure_count += 1
-            failure = FailureEpisode(self._failure_count, rm.stamp_nanoseconds(message.stamp), now_ns)
+            failure = FailureEpisode(self._failure_count, failure_stamp_ns, now_ns)
             self._failure = failure
+        standby = self._pause_live(failure_stamp_ns)
+        if standby is not None and self.planner is not None:
+            self._publish_plan(
+                failure,
+                standby.plan,
+                standby.state_stamp_ns,
+                self._live_frame,
+                "live",
+                "measured",
+                replan=False,
+                standby=True,
+            )
         self.get_logger().warning(f"engine failure #{failure.failure_id}: planning the landing")
         if self.planner is None:
             self._publish_status_only(failure, f"planner not configured ({self._setup_error})")
             return
         self._submit(self._plan_initial, failure, queue=True)
+
+    def _stop_failure(self, failure: FailureEpisode, outcome: EpisodePhase, state: EpisodeState) -> None:
+        """Stops planning for ``failure``; on ENDED the plan status says so (the last plan no longer applies)."""
+        with self._publish_lock:
+            if failure is not self._failure or not failure.stop(outcome):
+                return
+            if outcome is EpisodePhase.ENDED:
+                values = {
+                    "status": "ended",
+                    "safe": False,
+                    "verified": False,
+                    "fallback": False,
+                    "reason": "engine recovered: the failure flag stayed false for the recovery hold",
+                    "failure_id": failure.failure_id,
+                    "failure_stamp_ns": failure.event_stamp_ns,
+                    "ended_stamp_ns": state.ended_ns if state.ended_ns is not None else self._now_ns(),
+                    "episode_id": state.episode_id,
+                    "plans_published": len(failure.history),
+                    "replans": failure.replans,
+                }
+                self._status_publisher.publish(
+                    rm.diagnostic_status(
+                        DiagnosticStatus.WARN,
+                        f"{self.get_name()}: landing plan",
+                        "ENDED (engine recovered): no landing plan; the last trajectory no longer applies",
+                        self.airframe.name if self.planner is not None else "helireach",
+                        values,
+                    )
+                )
+        self._pause_live()  # forget the verdicts from before and during the episode; evaluation resumes afresh
+        self.get_logger().warning(
+            f"failure #{failure.failure_id}: episode {outcome.value}; planning stopped "
+            f"({failure.replans} re-plans, {failure.replans_failed} failed)"
+        )
+
+    # -- live evaluation -----------------------------------------------------------------------------------------
+    def _pause_live(self, failure_stamp_ns: int | None = None) -> LiveVerdict | None:
+        """Drops the live verdict in flight; with a failure stamp returns its standby, else resets the evaluator."""
+        with self._live_lock:
+            self._live_generation += 1
+            self._live_job = None
+            if self._live is None:
+                return None
+            if failure_stamp_ns is not None:
+                return self._live.standby(failure_stamp_ns)
+            self._live.reset()
+            return None
+
+    def _live_paused(self) -> bool:
+        """A failure episode runs: the planner's own, or the monitor's (until it ends or lands)."""
+        with self._lock:
+            failure, phase = self._failure, self._episode.phase
+        return (failure is not None and not failure.outcome) or phase is EpisodePhase.FAILED
+
+    def _on_live_timer(self) -> None:
+        """Starts a live evaluation if one is due and none is in flight (see the module docstring)."""
+        if self._live is None or self.planner is None or self._live_paused():
+            return
+        now_ns = self._now_ns()
+        current = self.current_state(measured_power=True)
+        if current is None or current[3] != "measured":
+            return  # no verdict from an assumed rotor speed: the latched one ages and says so (state_age_s)
+        state, stamp_ns, frame, _ = current
+        with self._live_lock:
+            if self._live_job is not None and not self._live_job.done():
+                return
+            # Due half a period early: the timer keeps the rate, its jitter must not skip a period.
+            if not self._live.due(now_ns + self._live.settings.period_ns // 2):
+                return
+            stored = self.envelope.nearest_plan(state[3], state[1]) if self.envelope is not None else None
+            prepared = self._live.prepare(state, stamp_ns, now_ns, stored.warm_start if stored is not None else None)
+            if prepared is None:
+                return  # the state is older than live_max_state_age
+            failure_now, warm_start = prepared
+            generation = self._live_generation
+            done = partial(self._live_done, generation, failure_now, stamp_ns, frame, now_ns)
+            if self._pool is not None:
+                timeout_s = _LIVE_TIMEOUT_FACTOR * self._solve_timeout
+                try:
+                    job = self._pool.submit(failure_now, warm_start, PRIORITY_LIVE, timeout_s, cold_check=True)
+                except RuntimeError:  # the pool is closed: the node is being destroyed
+                    return
+                self._live_job = job
+        if self._pool is not None:
+            job.add_done_callback(done)  # outside the lock: a job already done calls back at once, here
+            return
+        self._submit(self._live_in_process, done, failure_now, warm_start)  # skipped while a solve runs
+
+    def _live_in_process(self, done: Callable[[Future], None], state: np.ndarray, warm_start: Any) -> None:
+        """Without a pool: the live solve on the solver thread (cold check as in the workers)."""
+        future: Future = Future()
+        try:
+            future.set_result(solve_with_cold_check(self.planner.plan, state, warm_start))
+        except (ValueError, RuntimeError) as error:
+            future.set_exception(error)
+        done(future)
+
+    def _live_done(
+        self, generation: int, state: np.ndarray, stamp_ns: int, frame: str, started_ns: int, future: Future
+    ) -> None:
+        """Records a finished live solve and publishes its verdict (runs on the pool's or the solver thread)."""
+        try:
+            plan, error = future.result(), ""
+        except Exception as exception:  # a refused state, a dead or hung worker, a closed pool: an error verdict
+            plan, error = None, f"{type(exception).__name__}: {exception}"
+        with contextlib.suppress(Exception):  # the node may be shutting down
+            with self._live_lock:
+                if generation != self._live_generation or self._live is None:
+                    return  # a failure started (or the evaluator was reset) meanwhile: not evidence any more
+                verdict = self._live.record(state, stamp_ns, started_ns, self._now_ns(), plan, error)
+                standby = self._live.standby_verdict is verdict
+                if standby:
+                    self._live_frame = frame  # the vehicle frame of the standby's state
+                self._live_publisher.publish(self._live_status(verdict, standby))
+
+    def _live_status(self, verdict: LiveVerdict, standby: bool) -> DiagnosticStatus:
+        """The ``/helireach/live_reachability`` message of a verdict (msg_docs/helireach_live_reachability.md)."""
+        plan = verdict.plan
+        verified = plan is not None and plan.verified
+        values = {
+            "status": verdict.status,
+            "value": verdict.value,
+            "safe": verdict.safe,
+            "verified": verified,
+            "state_stamp_ns": verdict.state_stamp_ns,
+            "solve_time_ms": verdict.solve_time_ms,
+            "state_age_s": verdict.state_age_s(self._now_ns()),
+            "time_to_land_s": plan.time_to_land if plan is not None else math.nan,
+            "power_fraction": self._live.settings.power_fraction,
+            "reason": verdict.reason,
+            "standby": standby,
+            "descent_rate_m_s": verdict.state[0],
+            "forward_speed_m_s": verdict.state[1],
+            "rotor_speed_rad_s": verdict.state[2],
+            "height_m": verdict.state[3],
+            "distance_m": verdict.state[4],
+            "engine_power_w": verdict.state[5],
+        }
+        if plan is None:
+            level, text = DiagnosticStatus.ERROR, f"LIVE ERROR: no verdict ({verdict.reason})"
+        elif not plan.solver.success:  # plan_verdict would call it unsafe: it is unknown
+            level, text = DiagnosticStatus.ERROR, f"if the engine failed now: UNKNOWN (solver {plan.solver.status})"
+        else:
+            _, text = plan_verdict(plan, "measured")
+            level = DiagnosticStatus.OK if verdict.safe and verified else DiagnosticStatus.ERROR
+            text = f"if the engine failed now: {text}"
+        name = f"{self.get_name()}: live reachability"
+        return rm.diagnostic_status(level, name, text, self.airframe.name, values)
 
     # -- the solver thread ---------------------------------------------------------------------------------------
     def _submit(self, job: Callable[..., None], *args: Any, queue: bool = False) -> bool:
@@ -273,15 +580,28 @@ class LandingPlannerNode(Node):
             return self._solve_job is not None and not self._solve_job.done()
 
     def destroy_node(self) -> None:
-        """Lets a running solve finish (queued ones are dropped), then destroys the node."""
+        """Stops the solver workers (their jobs fail), lets a running in-process solve finish (queued ones are
+        dropped), then destroys the node."""
+        self._pause_live()  # the jobs failed by closing the pool are not verdicts
+        if self._pool is not None:
+            self._pool.close()
         self._solver_thread.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
+
+    def is_standby(self, record: PublishedPlan) -> bool:
+        """Whether a published plan is a standby plan (a live verdict's plan published on the failure)."""
+        return any(record is standby for standby in self.standby_plans)
+
+    def _standby_is_current(self, failure: FailureEpisode) -> bool:
+        return failure.current is not None and self.is_standby(failure.current)
 
     def _plan_initial(self, failure: FailureEpisode, retry: bool = False) -> None:
         """The first plan of a failure, warm-started from the envelope's nearest stored plan.
 
         ``retry``: called again because no converged plan is out yet; a fallback already out is not repeated.
         """
+        if not failure.active:
+            return
         current = self.current_state()
         if current is None:
             self._publish_status_only(failure, "no valid vehicle state at the failure: waiting for one")
@@ -293,21 +613,30 @@ class LandingPlannerNode(Node):
         if plan is None or not plan.solver.success:
             reason = error or f"solver {plan.solver.status}"
             self.get_logger().error(f"failure #{failure.failure_id}: no converged plan ({reason})")
-            if not (retry and failure.published):
-                self._publish_fallback(failure, state, stamp_ns, reason)
+            if not ((retry and failure.published) or self._standby_is_current(failure)):
+                self._publish_fallback(failure, state, stamp_ns, reason)  # a verified standby beats a fallback
             return
         self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False)
 
     def _solve(self, state: np.ndarray, warm_start: Any) -> tuple[Any | None, str]:
+        """A failure plan or re-plan (blocking; on the solver thread): (plan, "") or (None, why not)."""
         try:
-            return self.planner.plan(state, warm_start), ""
-        except (ValueError, RuntimeError) as error:
+            if self._pool is None:
+                return self.planner.plan(state, warm_start), ""
+            future = self._pool.submit(state, warm_start, PRIORITY_FAILURE, self._solve_timeout)
+            try:
+                # The pool fails the job solve_timeout after a worker took it; the extra wait covers the queue.
+                return future.result(timeout=self._solve_timeout + _QUEUE_WAIT_S), ""
+            except FutureTimeoutError:
+                future.cancel()
+                return None, f"no solver worker took the job within {self._solve_timeout + _QUEUE_WAIT_S:g} s"
+        except (ValueError, RuntimeError) as error:  # SolverWorkerError is a RuntimeError
             return None, f"{type(error).__name__}: {error}"
 
     def _on_deadline(self) -> None:
         with self._lock:
             failure = self._failure
-            if failure is None or failure.published or failure.deadline_handled:
+            if failure is None or not failure.active or failure.published or failure.deadline_handled:
                 return
             if self._now_ns() - failure.event_received_ns < self._deadline * 1e9:
                 return
@@ -326,6 +655,9 @@ class LandingPlannerNode(Node):
             return
         if not failure.published or failure.current is None or failure.current.fallback:
             self._submit(self._plan_initial, failure, True)  # still no converged plan for this failure: keep trying
+            return
+        if self._standby_is_current(failure):
+            self._submit(self._plan_initial, failure, True)  # the refined plan from the failure's state failed: again
             return
         self._submit(self._replan, failure)
 
@@ -369,9 +701,12 @@ class LandingPlannerNode(Node):
             self._publish_status_only(failure, f"{reason}; no fallback available ({error})")
             return
         with self._publish_lock:
-            if failure is not self._failure or (failure.current is not None and not failure.current.fallback):
-                return  # a newer failure or a converged plan came first
+            if failure is not self._failure or failure.outcome:
+                return  # a newer failure came, or this one is over
+            if failure.current is not None and not failure.current.fallback:
+                return  # a converged plan came first
             now_ns = self._now_ns()
+            lateness = plan_lateness(failure.event_stamp_ns, stamp_ns, self._max_message_age)
             record = PublishedPlan(
                 failure.failure_id,
                 failure.replans,
@@ -388,26 +723,36 @@ class LandingPlannerNode(Node):
                 "safe": False,
                 "verified": False,
                 "fallback": True,
+                "standby": False,
                 "fallback_kind": fallback.kind,
                 "fallback_source_status": fallback.source_status,
                 "reason": reason,
                 "time_to_land_s": fallback.time_to_land,
                 "latency_ms": record.latency_ms,
+                **self._lateness_values(lateness),
                 **self._common_values(failure, state, stamp_ns),
             }
+            _, text = late_verdict("WARN", f"FALLBACK (not verified): {fallback.description}; {reason}", lateness)
+            name = f"{self.get_name()}: landing plan"
             self._status_publisher.publish(
-                rm.diagnostic_status(
-                    DiagnosticStatus.WARN,
-                    f"{self.get_name()}: landing plan",
-                    f"FALLBACK (not verified): {fallback.description}; {reason}",
-                    self.airframe.name,
-                    values,
-                )
+                rm.diagnostic_status(DiagnosticStatus.WARN, name, text, self.airframe.name, values)
             )
             self._remember(failure, record)
         self.get_logger().warning(f"failure #{failure.failure_id}: published fallback {fallback.description}")
 
     # -- publishing ----------------------------------------------------------------------------------------------
+    @staticmethod
+    def _lateness_values(lateness: PlanLateness | None) -> dict[str, Any]:
+        """``late``, ``late_by_s``, ``state_delay_s``, ``after_fallback`` (re-plans: not late, no delay)."""
+        if lateness is None:
+            return {"late": False, "late_by_s": 0.0, "after_fallback": False}
+        return {
+            "late": lateness.late,
+            "late_by_s": lateness.late_by_s,
+            "state_delay_s": lateness.state_delay_s,
+            "after_fallback": lateness.after_fallback,
+        }
+
     def _common_values(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int) -> dict[str, Any]:
         return {
             "failure_id": failure.failure_id,
@@ -434,13 +779,23 @@ class LandingPlannerNode(Node):
         warm_source: str,
         rotor_source: str,
         replan: bool,
+        standby: bool = False,
     ) -> None:
-        """Publishes a converged plan (safe, unverified or unsafe) as trajectory, path and status."""
+        """Publishes a converged plan (safe, unverified or unsafe) as trajectory, path and status.
+
+        ``standby``: the live verdict's plan published on the failure (flagged so; the refined plan replaces it).
+        """
         with self._publish_lock:
-            if failure is not self._failure:
-                return  # a newer failure superseded this one while solving
+            if failure is not self._failure or failure.outcome:
+                return  # a newer failure superseded this one, or it ended, while solving
             now_ns = self._now_ns()
-            late = not replan and failure.published
+            # Late "after a fallback" only if a fallback went out first: a standby before it is a verified plan.
+            after_fallback = any(record.fallback for record in failure.history)
+            lateness = (
+                None
+                if replan
+                else plan_lateness(failure.event_stamp_ns, stamp_ns, self._max_message_age, after_fallback)
+            )
             reference_ns = failure.event_received_ns if not replan else stamp_ns
             record = PublishedPlan(
                 failure.failure_id,
@@ -458,19 +813,28 @@ class LandingPlannerNode(Node):
             )
             values = {
                 **rm.plan_status_values(plan),
+                "standby": standby,
                 "warm_start": warm_source,
                 "replan_index": failure.replans if replan else 0,
-                "late": late,
+                **self._lateness_values(lateness),
                 "latency_ms": record.latency_ms,
                 "rotor_speed_source": rotor_source,
                 **self._common_values(failure, plan.initial_state, stamp_ns),
             }
             level_name, text = plan_verdict(plan, rotor_source)
+            if standby:
+                state_age_s = (failure.event_stamp_ns - stamp_ns) * 1e-9
+                text = f"STANDBY (live plan from {state_age_s:.2f} s before the failure; refining): {text}"
+            if lateness is not None:
+                level_name, text = late_verdict(level_name, text, lateness)
             level = rm.DIAGNOSTIC_LEVELS[level_name]
             self._status_publisher.publish(
                 rm.diagnostic_status(level, f"{self.get_name()}: landing plan", text, self.airframe.name, values)
             )
             self._remember(failure, record)
+            if standby:
+                self.standby_plans.append(record)
+                del self.standby_plans[:-_PLAN_HISTORY]
         if not replan:
             self.get_logger().info(f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
 
@@ -486,7 +850,7 @@ class LandingPlannerNode(Node):
             "failure_id": failure.failure_id,
         }
         with self._publish_lock:
-            if failure is self._failure and not failure.published:
+            if failure is self._failure and not failure.published and not failure.outcome:
                 self._status_publisher.publish(
                     rm.diagnostic_status(
                         DiagnosticStatus.ERROR,
@@ -529,20 +893,55 @@ class LandingPlannerNode(Node):
             "envelope": self._envelope_note,
             "failures": self._failure_count,
             "solving": self.solving,
+            "failure_episode": self._episode.phase.value,
+            "solver_workers": self._pool.pool_settings.workers if self._pool is not None else 0,
+            "solve_timeout_s": self._solve_timeout,
         }
+        problems: list[str] = []
+        no_worker = False
+        if self._pool is not None:
+            ready = self._pool.ready_workers
+            values.update(
+                ready_workers=ready,
+                busy_workers=self._pool.busy_workers,
+                worker_restarts=self._pool.restarts,
+                last_worker_error=self._pool.last_error,
+            )
+            if ready == 0:
+                no_worker = True
+                problems.append("no solver worker ready (failures get fallbacks)")
+            if self._pool.restarts:
+                problems.append(f"{self._pool.restarts} solver worker restarts (last: {self._pool.last_error})")
+        with self._live_lock:
+            live = self._live
+            if live is not None:
+                latest = live.latest
+                values.update(
+                    live_rate_hz=live.settings.rate_hz,
+                    live_evaluations=live.evaluations,
+                    live_errors=live.errors,
+                    live_status=latest.status if latest is not None else "none",
+                    standby_available=live.standby_verdict is not None,
+                )
+            else:
+                values["live_rate_hz"] = 0.0
         if failure is not None:
             values.update(failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed)
+            values["failure_outcome"] = failure.outcome
             if failure.current is not None:
                 values["last_latency_ms"] = failure.current.latency_ms
-        level = DiagnosticStatus.OK if self.envelope is not None else DiagnosticStatus.WARN
-        text = "ready" if self.envelope is not None else "ready without an envelope (cold starts)"
+        level = DiagnosticStatus.OK if self.envelope is not None and not problems else DiagnosticStatus.WARN
+        level = DiagnosticStatus.ERROR if no_worker else level
+        text = "; ".join(
+            ["ready" if self.envelope is not None else "ready without an envelope (cold starts)", *problems]
+        )
         status = rm.diagnostic_status(level, f"{self.get_name()}: planner", text, self.airframe.name, values)
         self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
 
 
 def main(args: list[str] | None = None) -> None:
     """Runs the planner node until Ctrl-C or SIGTERM."""
-    run_node(LandingPlannerNode, args)
+    raise SystemExit(run_node(LandingPlannerNode, args))  # 2: bad command line or parameter (one line on stderr)
 
 
 if __name__ == "__main__":
