@@ -1,8 +1,8 @@
 """The safety status node holds the envelope to its validity domain (real rclpy, the shipped envelope).
 
 Outside the domain (a descent, a rotor off its governed speed) only a live verdict may answer; with none, the
-status is STALE and says why. The live verdicts themselves are tested with the planner in
-``test_live_planner_ros.py``.
+status is STALE and says why; with the live planner, a descent the level-trim envelope calls safe is an ERROR.
+The live verdicts themselves are tested in ``test_live_planner_ros.py``.
 """
 
 from __future__ import annotations
@@ -10,12 +10,14 @@ from __future__ import annotations
 import test_ros_nodes
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.context import Context
+from rclpy.parameter import Parameter
 from test_ros_nodes import OMEGA0, Harness, level_is
 
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.ros.nodes.monitor import VehicleMonitor
+from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 
 FPM = FT / 60.0
 context = test_ros_nodes.context  # the fixture: one rclpy context per test, discovery off
@@ -41,5 +43,35 @@ def test_outside_the_envelope_domain_without_a_live_verdict_the_status_is_stale(
         )
         assert statuses[-1].level == DiagnosticStatus.STALE
         assert harness.keep_publishing(500 * FT, 75 * KT, until=level_is(statuses, DiagnosticStatus.OK))
+    finally:
+        harness.close()
+
+
+def test_with_the_live_planner_a_descent_the_envelope_calls_safe_is_an_error(context: Context) -> None:
+    planner = LandingPlannerNode(
+        context=context,
+        parameter_overrides=[Parameter("solver_workers", value=0), Parameter("replan_period", value=0.0)],
+    )
+    harness = Harness(context, VehicleMonitor(context=context), EnvelopeStatusNode(context=context), planner)
+    statuses = harness.listen(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS)
+    try:
+        assert harness.keep_publishing(
+            500 * FT,
+            75 * KT,
+            until=lambda: (
+                level_is(statuses, DiagnosticStatus.OK)()
+                and rm.status_values(statuses[-1]).get("evidence") == "envelope+live"
+            ),
+        ), statuses[-1].message
+        # 20 ft, 90 kt, 2,000 ft/min down: outside the envelope's domain (it would say safe); the live verdict says
+        # no safe landing exists from there.
+        assert harness.keep_publishing(
+            20 * FT, 90 * KT, climb_rate=-2000 * FPM, until=level_is(statuses, DiagnosticStatus.ERROR)
+        ), statuses[-1].message
+        values = rm.status_values(statuses[-1])
+        assert (
+            values["evidence"] == "live" and values["live_status"] == "unsafe" and values["envelope_status"] == "safe"
+        )
+        assert "outside the envelope's domain" in statuses[-1].message
     finally:
         harness.close()
