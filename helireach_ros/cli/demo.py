@@ -39,6 +39,8 @@ class DemoResult:
 
     Attributes:
         status_before_failure: the last safety verdict while cruising (level name, message) or None.
+        status_during_descent: how often each (level, evidence) of the safety status was seen from the failure to
+            the touchdown (sampled at every executor wake-up).
         touchdown: the vehicle's :class:`~helireach_ros.core.simulation.TouchdownReport` (None on timeout).
         first_plan: the first published plan record (:class:`~helireach_ros.core.failure_episode.PublishedPlan`)
             made after the failure (the standby plan is not it).
@@ -52,6 +54,7 @@ class DemoResult:
 
     def __init__(self) -> None:
         self.status_before_failure: tuple[str, str] | None = None
+        self.status_during_descent: dict[tuple[str, str], int] = {}
         self.touchdown: Any = None
         self.first_plan: Any = None
         self.standby_plan: Any = None
@@ -125,7 +128,15 @@ def run_demo(
 
             system.spin_until(cruising, _TOUCHDOWN_TIMEOUT_S)
             remaining = _TOUCHDOWN_TIMEOUT_S - (time.monotonic() - started)
-            system.spin_until(lambda: sim.touchdown is not None, remaining)
+
+            def landed() -> bool:
+                verdict = status.verdict
+                if verdict is not None:
+                    key = (LEVEL_NAMES.get(verdict.level, "?"), str(verdict.values.get("evidence", "?")))
+                    result.status_during_descent[key] = result.status_during_descent.get(key, 0) + 1
+                return sim.touchdown is not None
+
+            system.spin_until(landed, remaining)
             system.drain()
             result.touchdown = sim.touchdown
             result.plans = [record for record in planner.published_plans if record.failure_id == 1]
@@ -172,6 +183,16 @@ def summary(result: DemoResult) -> str:
     ]
     level, message = result.status_before_failure or ("none", "no safety status received")
     lines.append(f"  status before the failure : {level}: {message}")
+    samples = sum(result.status_during_descent.values())
+    if samples:
+        shares = sorted(result.status_during_descent.items(), key=lambda item: -item[1])
+        seen = ", ".join(
+            f"{level} from the {source} {100 * count / samples:.0f} %"
+            if count >= samples / 100
+            else f"{level} from the {source} <1 %"
+            for (level, source), count in shares
+        )
+        lines.append(f"  status during the descent : {seen}")
     first = result.first_plan
     if first is None:
         lines.append("  landing plan              : none published")
