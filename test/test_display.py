@@ -49,8 +49,10 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState
+from helireach_ros.core.flight_phase import plan_cue_events
 from helireach_ros.core.units import FT, KT
 from helireach_ros.display.node import CockpitDisplay
+from helireach_ros.display.pilot_units import axis_margins
 from helireach_ros.display.sections import (
     banner_level,
     boundary_segments,
@@ -259,10 +261,32 @@ class DevToolsPage:
             "({word: document.getElementById('banner-word').textContent,"
             " level: document.getElementById('banner').dataset.level,"
             " detail: document.getElementById('banner-detail').textContent,"
-            " margin: document.getElementById('margin-value').textContent})"
+            " phase: document.body.dataset.phase, bodyLevel: document.body.dataset.level,"
+            " margin: window.helireach.margins})"
         )
         return await self.wait_for(
-            expression, lambda shown: shown["level"] == level and detail in shown["detail"], what, timeout_s
+            expression,
+            lambda shown: shown["level"] == level == shown["bodyLevel"] and detail in shown["detail"],
+            what,
+            timeout_s,
+        )
+
+    async def phase(self, phase: str, level: str, what: str, word: str | None = None) -> dict[str, Any]:
+        """Waits until ``<body>`` says ``data-phase=phase`` and ``data-level=level`` (and the banner ``word``)."""
+        expression = (
+            "({phase: document.body.dataset.phase, level: document.body.dataset.level,"
+            " word: document.getElementById('banner-word').textContent,"
+            " detail: document.getElementById('banner-detail').textContent,"
+            " engine: document.getElementById('engine-strip').hidden ? null"
+            " : document.getElementById('engine-word').textContent,"
+            " timer: document.getElementById('engine-timer').textContent,"
+            " cue: window.helireach.cue, readouts: window.helireach.readouts, rotor: window.helireach.rotor,"
+            " side: window.helireach.side})"
+        )
+        return await self.wait_for(
+            expression,
+            lambda shown: (shown["phase"], shown["level"]) == (phase, level) and word in (None, shown["word"]),
+            what,
         )
 
     async def screenshot(self) -> bytes:
@@ -299,7 +323,7 @@ def status_message(
 
 
 class VehicleAndStatus(Node):
-    """Publishes the state (60 Hz), rotor speed (60 Hz) and safety status (10 Hz) the test sets."""
+    """Publishes the state (60 Hz), rotor speed (60 Hz), safety status and failure episode (10 Hz) the test sets."""
 
     def __init__(self, context: Context, state_topic: str = "/helireach/state") -> None:
         super().__init__("display_test_vehicle", context=context)
@@ -307,6 +331,8 @@ class VehicleAndStatus(Node):
         self.state: tuple[float, float, float] | None = None  # height m, speed m/s, climb m/s
         self.rotor_speed: float | None = None
         self.status: DiagnosticStatus | None = None
+        self.episode: DiagnosticStatus | None = None  # the monitor's episode state, republished like the monitor
+        self.distance = 0.0  # m along the track
         self.state_publisher = self.create_publisher(Odometry, state_topic, 10)
         self.rotor_publisher = self.create_publisher(JointState, "/vehicle/rotor", 10)
         self.status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/safety_status", LATCHED)
@@ -315,6 +341,8 @@ class VehicleAndStatus(Node):
         self.trajectory_publisher = self.create_publisher(JointTrajectory, "/helireach/landing_trajectory", LATCHED)
         self.path_publisher = self.create_publisher(PathMsg, "/helireach/landing_path", LATCHED)
         self.plan_status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/plan_status", LATCHED)
+        self.episode_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, RELIABLE)
+        self.touchdown_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_TOUCHDOWN, LATCHED)
         self.create_timer(1.0 / 60.0, self._publish_vehicle)
         self.create_timer(0.1, self._publish_status)
 
@@ -332,6 +360,7 @@ class VehicleAndStatus(Node):
             message.header.frame_id = "odom"
             message.child_frame_id = "base_stabilized"
             message.pose.pose.position.z = state[0]
+            message.pose.pose.position.x = self.distance
             message.twist.twist.linear.x = state[1]
             message.twist.twist.linear.z = state[2]
             self.state_publisher.publish(message)
@@ -342,9 +371,11 @@ class VehicleAndStatus(Node):
 
     def _publish_status(self) -> None:
         with self._lock:
-            status = self.status
+            status, episode = self.status, self.episode
         if status is not None:
             self.status_publisher.publish(status)
+        if episode is not None:
+            self.episode_publisher.publish(episode)
 
 
 class RosHarness:
@@ -469,41 +500,63 @@ def near(value: float, expected: float, tolerance: float = 0.05) -> bool:
 # ------------------------------------------------------------------------------------------------------------
 
 
+def expected_margins(envelope: Any, height: float, speed: float) -> dict[str, str]:
+    """What the banner's two margins must read for a state (from the envelope's nodes, as the page's rule)."""
+    margins = axis_margins(envelope.heights, envelope.speeds, np.asarray(envelope.status) == "safe", height, speed)
+    texts = {}
+    for axis, unit, words in (("vertical", FT, ("ABOVE", "BELOW")), ("horizontal", KT, ("FASTER", "SLOWER"))):
+        line = margins[axis]
+        if line["offset"] is None:
+            texts[axis] = "--- CLEAR" if line["safe"] else "--- NO SAFE"
+        else:
+            texts[axis] = f"{abs(line['offset']) / unit:.0f} {words[0] if line['offset'] >= 0 else words[1]}"
+    return texts
+
+
 @needs_chromium
-def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, real_plan: Any, tmp_path: Path) -> None:
-    display, vehicle = ros.display, ros.vehicle
+def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, tmp_path: Path) -> None:
+    vehicle = ros.vehicle
     envelope_id = display_envelope_id(ros)
+    envelope = load_envelope(ros.display.get_parameter("envelope_file").value)
     cruise = (500 * FT, 75 * KT, 0.0)
     slow = (250 * FT, 40 * KT, -1.0)
     low = (100 * FT, 20 * KT, -2.0)
 
     async def scenario(page: DevToolsPage) -> None:
-        shown = await page.banner("nodata", "NO DATA before any safety status")
-        assert shown["word"] == "NO DATA"
+        shown = await page.banner("nodata", "STALE before any safety status", detail="NO SAFETY STATUS")
+        assert (shown["word"], shown["phase"]) == ("STALE", "stale")
         assert await page.evaluate("document.getElementById('hv-nodata').hidden") is True  # envelope loaded
 
         vehicle.rotor_speed = 0.99 * 27.0
         vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))
         shown = await page.banner("safe", "SAFE")
-        assert (shown["word"], shown["margin"]) == ("SAFE", "+180")
+        assert (shown["word"], shown["phase"]) == ("SAFE", "normal")
+        # no episode heard: the H-V status is shown, and the banner says what is missing
+        assert "NO FAILURE-EPISODE STATUS" in shown["detail"]
+        shown = await page.wait_for(
+            "window.helireach.margins", lambda m: m == expected_margins(envelope, *cruise[:2]), "the margins"
+        )
         first = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 75) and near(m["heightFt"], 500), "marker")
 
         vehicle.set(slow, status_message(DiagnosticStatus.WARN, "near the boundary", *slow[:2], 12.0, envelope_id))
         shown = await page.banner("caution", "CAUTION")
-        assert (shown["word"], shown["margin"]) == ("CAUTION", "+12")
+        assert shown["word"] == "CAUTION"
+        await page.wait_for("window.helireach.margins", lambda m: m == expected_margins(envelope, *slow[:2]), "margins")
         second = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 40) and near(m["heightFt"], 250), "marker")
         assert second["x"] < first["x"] and second["y"] > first["y"]  # slower: left; lower: down the canvas
 
         vehicle.set(low, status_message(DiagnosticStatus.ERROR, "in the unsafe set", *low[:2], -35.0, envelope_id))
         shown = await page.banner("avoid", "AVOID")
-        assert (shown["word"], shown["margin"]) == ("AVOID", "\u221235")
+        assert shown["word"] == "AVOID"
+        await page.wait_for("window.helireach.margins", lambda m: m == expected_margins(envelope, *low[:2]), "margins")
         third = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 20) and near(m["heightFt"], 100), "marker")
         assert third["x"] < second["x"] and third["y"] > second["y"]
         save_artifact(tmp_path, "display-avoid.png", await page.screenshot())
 
         vehicle.set(None, None)  # the status node (and the vehicle) fall silent
-        shown = await page.banner("nodata", "NO DATA once the status topic is silent")
-        assert shown["word"] == "NO DATA" and "silent" in shown["detail"].lower() and shown["margin"] == "---"
+        shown = await page.banner("nodata", "STALE once the status topic is silent")
+        assert (shown["word"], shown["phase"]) == ("STALE", "stale") and "SAFETY STATUS SILENT" in shown["detail"]
+        assert shown["margin"] == {"vertical": "---", "horizontal": "---"}
         await page.wait_for(MARKER, lambda m: m["stale"], "the marker to show a stale state")
         save_artifact(tmp_path, "display-nodata.png", await page.screenshot())
 
@@ -513,80 +566,181 @@ def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, r
         shown = await page.banner("nodata", "NO DATA for a STALE status")
         assert "NO VALID STATE" in shown["detail"]
 
-        # engine failure: the planner publishes its plan; the vehicle follows it
+        assert page.errors == [], f"the page reported errors: {page.errors}"
+
+    run_page(browser, ros.display.url, scenario)
+
+
+def episode_message(phase: EpisodePhase, episode_id: int = 1) -> DiagnosticStatus:
+    """The monitor's ``/helireach/failure_episode`` for episode ``episode_id`` in ``phase``."""
+    ended = 2_000_000_000 if phase in (EpisodePhase.ENDED, EpisodePhase.LANDED) else None
+    started = 1_000_000_000 if episode_id else None
+    state = EpisodeState(phase, episode_id, started_ns=started, ended_ns=ended, flag=phase is EpisodePhase.FAILED)
+    level = rm.DIAGNOSTIC_LEVELS[state.level_name]
+    return rm.diagnostic_status(level, "helireach_monitor: failure episode", state.text, "vehicle", state.as_values())
+
+
+def touchdown_message(descent_rate: float, forward_speed: float, time_after_failure: float) -> DiagnosticStatus:
+    """The vehicle's ``/helireach/touchdown`` (msg_docs/helireach_touchdown.md) for the UH-60A-class limits."""
+    limits = load_airframe("uh60a_class").limits
+    within = descent_rate <= limits.max_descent_rate and forward_speed <= limits.max_forward_speed
+    values = {
+        "within_limits": within,
+        "descent_rate_m_s": descent_rate,
+        "forward_speed_m_s": forward_speed,
+        "rotor_speed_pct": 96.0,
+        "time_after_failure_s": time_after_failure,
+        "max_descent_rate_m_s": limits.max_descent_rate,
+        "max_forward_speed_m_s": limits.max_forward_speed,
+        "reason": "" if within else "too fast",
+    }
+    level = DiagnosticStatus.OK if within else DiagnosticStatus.ERROR
+    return rm.diagnostic_status(level, "sim: touchdown", "LANDED" if within else "OUTSIDE", "uh60a_class", values)
+
+
+def signed_number(text: str) -> float:
+    """A page number such as ``+12`` or ``−3`` (U+2212) as a float."""
+    return float(text.replace("\u2212", "-").replace("+", ""))
+
+
+@needs_chromium
+def test_whole_run_by_flight_phase(ros: RosHarness, browser: Browser, real_plan: Any, tmp_path: Path) -> None:
+    """normal → failure (no plan, then the verified plan) → descent with cues → touchdown → landed → a silent
+    source → a landing found in the state → an ended episode: body data-phase/data-level and key texts at each."""
+    vehicle = ros.vehicle
+    envelope_id = display_envelope_id(ros)
+    assert real_plan.safe and real_plan.verified, "the 500 ft / 75 kt plan must be replay-verified for this run"
+    cruise = (500 * FT, 75 * KT, 0.0)
+    flying = status_message(DiagnosticStatus.OK, "ENGINE FAILURE: landing plan verified", *cruise[:2], 0.0, "")
+    trajectory_section_ = rm.read_trajectory(rm.trajectory_message(real_plan, 0))
+    flare_times = [
+        event.time_s
+        for event in plan_cue_events(trajectory_section_[1], *trajectory_section_[2])
+        if event.kind == "FLARE"
+    ]
+    assert flare_times, "the plan has no flare"
+    # the plan started this long ago: its flare is 3.7 s ahead when it arrives
+    plan_age_s = flare_times[0] - 3.7
+    assert 0.0 < plan_age_s < 10.0
+
+    async def shot(page: DevToolsPage, phase: str) -> None:
+        save_artifact(tmp_path, f"display-phase-{phase}.png", await page.screenshot())
+
+    async def scenario(page: DevToolsPage) -> None:
+        # NORMAL: the H-V status, no engine strip, no cue
+        vehicle.rotor_speed = 27.0
+        vehicle.episode = episode_message(EpisodePhase.NORMAL, 0)
         vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))
-        await page.banner("safe", "SAFE before the failure")
-        assert (await page.evaluate(PLAN))["shown"] is False
-        start = vehicle.get_clock().now().to_msg()
-        trajectory, path, plan_status = plan_messages(real_plan, start)
+        shown = await page.phase("normal", "safe", "NORMAL", "SAFE")
+        assert shown["engine"] is None and shown["cue"] is None and shown["readouts"]["climbLabel"] == "V/S"
+        await shot(page, "normal")
+
+        # engine failure: AUTOROTATION at once, NO PLAN (red) until the plan comes
         for publisher in (vehicle.trajectory_publisher, vehicle.path_publisher, vehicle.plan_status_publisher):
             wait_until(lambda publisher=publisher: publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        now_ns = vehicle.get_clock().now().nanoseconds
+        start = rm.stamp_message(now_ns - round(plan_age_s * 1e9))
         vehicle.failure_publisher.publish(Header(stamp=start, frame_id="failure"))
-        await page.wait_for(PLAN, lambda p: p["state"] == "planning", "PLANNING after the failure event")
+        vehicle.episode = episode_message(EpisodePhase.FAILED, 1)
+        vehicle.set(cruise, flying)
+        shown = await page.phase("autorotation", "avoid", "NO PLAN after the failure", "NO PLAN")
+        assert shown["engine"] == "ENGINE FAILURE" and shown["timer"].startswith("T+")
+
+        # the verified plan: the banner is the plan; the aircraft a third of the way down it, rotor near its limit
+        trajectory, path, plan_status = plan_messages(real_plan, start)
         vehicle.trajectory_publisher.publish(trajectory)
         vehicle.path_publisher.publish(path)
         vehicle.plan_status_publisher.publish(plan_status)
-        # until its status arrives a plan counts as unverified; then the badge follows the plan status
-        expected_badge = "VERIFIED" if real_plan.verified and real_plan.safe else "UNSAFE"
-        plan = await page.wait_for(
-            PLAN, lambda p: p["shown"] and p["pathPoints"] > 1 and p.get("badge") == expected_badge, "the plan"
-        )
-        assert 0.0 <= plan["timeToTouchdown"] <= real_plan.time_to_land
-        assert plan["pathPoints"] == len(real_plan.times)
-        # put the aircraft a third of the way down the plan for the picture
         index = len(real_plan.times) // 3
-        y, v, rotor, h = real_plan.states[:4, index]
-        vehicle.rotor_speed = float(rotor)
-        vehicle.set(
-            (float(h), float(v), -float(y)), status_message(DiagnosticStatus.OK, "safe", h, v, 60.0, envelope_id)
+        y, v, _, h, x = real_plan.states[:5, index]
+        vehicle.distance = float(x)
+        vehicle.rotor_speed = 1.135 * 27.0  # inside the 3 % amber band below the 115 % limit
+        vehicle.set((float(h), float(v), -float(y)), flying)
+        await page.phase("autorotation", "safe", "the verified plan", "VERIFIED")
+        shown = await page.wait_for(
+            "window.helireach.cue", lambda cue: cue == "FLARE IN 3 s", "the cue FLARE IN 3 s", timeout_s=5.0
         )
-        await page.wait_for(MARKER, lambda m: near(m["heightFt"], h / FT, 0.5), "marker on the descent")
+        shown = await page.phase("autorotation", "safe", "the descent", "VERIFIED")
+        assert "TOUCHDOWN IN" in shown["detail"]
+        readouts = shown["readouts"]
+        assert readouts["climbLabel"] == "DESCENT" and readouts["climb"] == f"{y / FT * 60:.0f}"
+        assert 20.0 < signed_number(readouts["thrust"]) < 200.0 and readouts["trend"] in ("\u25b2", "\u25bc", "\u25b6")
+        assert shown["rotor"] == "caution"
+        to_go = (real_plan.states[4, -1] - x) / FT
+        assert shown["side"] == {"points": len(real_plan.times), "distance": f"TO TOUCHDOWN {to_go:.0f} ft AHEAD"}
+        await shot(page, "autorotation")
+        # the flare: the cue says it, then the planned pitch goes nose up past 10°, shown positive (−θ)
+        await page.wait_for("window.helireach.cue", lambda cue: cue == "FLARE", "the cue FLARE", timeout_s=5.0)
         await page.wait_for(
-            "document.getElementById('failure-label').hidden", lambda hidden: hidden is False, "failure label"
+            "window.helireach.readouts.pitch", lambda p: p.startswith("+") and signed_number(p) >= 10, "nose up"
         )
-        png = await page.screenshot()
-        assert png.startswith(b"\x89PNG")
-        save_artifact(tmp_path, "display.png", png)
-        assert page.errors == [], f"the page reported errors: {page.errors}"
 
-        # a re-plan that missed its deadline: the planner falls back and says so
+        # the rotor sensor falls silent in the descent: STALE, and the verified plan is no longer shown green
+        rotor_speed, vehicle.rotor_speed = vehicle.rotor_speed, None
+        shown = await page.phase("stale", "nodata", "STALE when the rotor is silent", "STALE")
+        assert "ROTOR SILENT" in shown["detail"] and "LAST PHASE AUTOROTATION" in shown["detail"]
+        plan = await page.evaluate(PLAN)
+        assert plan["badge"] == "VERIFIED" and plan["badgeKind"] == "stale"
+        vehicle.rotor_speed = rotor_speed
+        await page.phase("autorotation", "safe", "the rotor back", "VERIFIED")
+
+        # touchdown: the vehicle's report decides; the timer stops; the rotor running down is not red
+        wait_until(lambda: vehicle.touchdown_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        vehicle.rotor_speed = 0.80 * 27.0
+        vehicle.set((0.0, 3.0 * KT, 0.0), flying)
+        vehicle.touchdown_publisher.publish(touchdown_message(4.6 * FT, 3.1 * KT, 12.1))
+        shown = await page.phase("landed", "safe", "LANDED within limits", "LANDED \u00b7 WITHIN LIMITS")
+        assert "SINK 4.6 ft/s (LIMIT 8)" in shown["detail"] and "SPEED 3.1 kt (LIMIT 6)" in shown["detail"]
+        assert shown["engine"] == "ENGINE FAILURE \u00b7 LANDED" and shown["timer"] == "TOUCHDOWN AT T+12.1 s"
+        vehicle.episode = episode_message(EpisodePhase.LANDED, 1)
+        shown = await page.phase("landed", "safe", "LANDED by the episode too", "LANDED \u00b7 WITHIN LIMITS")
+        assert shown["rotor"] == "ground" and shown["timer"] == "TOUCHDOWN AT T+12.1 s"
+        await shot(page, "landed")
+
+        # a silent source: STALE, grey, the last values struck out
+        vehicle.set(None, flying)
+        shown = await page.phase("stale", "nodata", "STALE when the state is silent", "STALE")
+        assert "STATE SILENT" in shown["detail"] and "LAST PHASE LANDED" in shown["detail"]
+        decoration = await page.evaluate("getComputedStyle(document.getElementById('height-value')).textDecorationLine")
+        assert decoration == "line-through"
+        await shot(page, "stale")
+
+        # episode 2: a fallback, then a touchdown found in the state (no report): within limits, but only amber
+        vehicle.rotor_speed = 27.0
+        vehicle.set((30 * FT, 20 * KT, -2.0), flying)
+        vehicle.failure_publisher.publish(Header(stamp=vehicle.get_clock().now().to_msg(), frame_id="failure"))
+        vehicle.episode = episode_message(EpisodePhase.FAILED, 2)
+        await page.phase("autorotation", "avoid", "episode 2: the old plan is gone", "NO PLAN")
         fallback = DiagnosticStatus(
             level=DiagnosticStatus.WARN,
-            message="deadline missed: nearest envelope plan",
+            message="FALLBACK: nearest envelope plan",
             values=[KeyValue(key="fallback", value="true"), KeyValue(key="verified", value="false")],
         )
         vehicle.plan_status_publisher.publish(fallback)
-        await page.wait_for(PLAN, lambda p: p.get("badge") == "FALLBACK", "the FALLBACK badge")
+        await page.phase("autorotation", "caution", "FALLBACK, never green", "FALLBACK")
+        vehicle.set((2.0, 5.0 * KT, -1.5), flying)
+        await page.wait_for(MARKER, lambda m: near(m["heightFt"], 2.0 / FT, 0.5), "the aircraft near the ground")
+        vehicle.set((0.0, 2.0 * KT, -1.2), flying)
+        shown = await page.phase("landed", "caution", "LANDED, the report awaited", "LANDED")
+        assert shown["detail"] == "AWAITING THE TOUCHDOWN REPORT"
+        shown = await page.phase("landed", "caution", "LANDED from the state", "LANDED \u00b7 WITHIN LIMITS")
+        assert "FROM STATE" in shown["detail"] and f"SINK {1.2 / FT:.1f} ft/s" in shown["detail"]
 
-        # a plan verified from a state long after the failure: caution, never the green VERIFIED
-        if real_plan.verified and real_plan.safe:
-            late = plan_messages(real_plan, start)[2]
-            late.values.extend([KeyValue(key="late", value="true"), KeyValue(key="late_by_s", value="2.5")])
-            vehicle.plan_status_publisher.publish(late)
-            await page.wait_for(PLAN, lambda p: p.get("badge") == "VERIFIED \u00b7 LATE", "the LATE badge")
-
-        # the engine relit: the monitor's episode ENDED and the planner's plan status `ended` hide the plan
-        episode_publisher = vehicle.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, RELIABLE)
-        wait_until(lambda: episode_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
-        episode_publisher.publish(episode_message(EpisodePhase.ENDED))
+        # episode 3: the engine relights: ENDED, no plan, the H-V status again
+        vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))
+        vehicle.failure_publisher.publish(Header(stamp=vehicle.get_clock().now().to_msg(), frame_id="failure"))
+        vehicle.episode = episode_message(EpisodePhase.FAILED, 3)
+        await page.phase("autorotation", "avoid", "episode 3: episode 2's fallback is gone", "NO PLAN")
+        vehicle.episode = episode_message(EpisodePhase.ENDED, 3)
         vehicle.plan_status_publisher.publish(ended_plan_status())
+        shown = await page.phase("ended", "safe", "ENDED", "ENGINE RECOVERED")
+        assert shown["engine"] == "ENGINE RECOVERED \u00b7 EPISODE ENDED" and "NO LANDING PLAN" in shown["detail"]
         plan = await page.wait_for(PLAN, lambda p: p["state"] == "ended" and p.get("badge") == "ENDED", "ENDED")
         assert plan["shown"] is False
-        await page.wait_for("window.helireach.episode", lambda phase: phase == "ended", "the episode phase")
-        label = await page.evaluate("document.getElementById('failure-label').textContent")
-        assert label == "ENGINE RECOVERED \u00b7 EPISODE ENDED"
-        save_artifact(tmp_path, "display-ended.png", await page.screenshot())
+        await shot(page, "ended")
         assert page.errors == [], f"the page reported errors: {page.errors}"
 
-    run_page(browser, display.url, scenario)
-
-
-def episode_message(phase: EpisodePhase) -> DiagnosticStatus:
-    """The monitor's ``/helireach/failure_episode`` for an episode 1 in ``phase``."""
-    ended = 2_000_000_000 if phase in (EpisodePhase.ENDED, EpisodePhase.LANDED) else None
-    state = EpisodeState(phase, 1, started_ns=1_000_000_000, ended_ns=ended, flag=phase is EpisodePhase.FAILED)
-    level = rm.DIAGNOSTIC_LEVELS[state.level_name]
-    return rm.diagnostic_status(level, "helireach_monitor: failure episode", state.text, "vehicle", state.as_values())
+    run_page(browser, ros.display.url, scenario)
 
 
 def ended_plan_status() -> DiagnosticStatus:
@@ -661,8 +815,9 @@ def test_page_follows_the_real_status_node(browser: Browser, envelope_file: Path
                 harness.vehicle.set((height, speed, 0.0))
                 await page.banner(level, f"{level} from the status node at {height / FT:.0f} ft {speed / KT:.0f} kt")
                 await page.wait_for(MARKER, lambda m, h=height: near(m["heightFt"], h / FT), "the marker")
-            harness.vehicle.set(None)  # the vehicle falls silent: the status node says STALE
-            await page.banner("nodata", "NO DATA from the status node", detail="OLD")
+            harness.vehicle.set(None)  # the vehicle falls silent: the status node says STALE, the display too
+            shown = await page.banner("nodata", "NO DATA or STALE once the vehicle is silent")
+            assert "OLD" in shown["detail"] or "STATE SILENT" in shown["detail"], shown
 
         run_page(browser, harness.display.url, scenario)
     finally:
@@ -890,6 +1045,34 @@ def test_serves_only_the_page_files(envelope_file: Path) -> None:
         with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
             asyncio.run(scenario())
         assert refused.value.status == 403
+    finally:
+        harness.close()
+
+
+def test_host_header_check(envelope_file: Path) -> None:
+    """Only loopback names, the bound address and ``allowed_hosts`` with the server's port are answered (421)."""
+    harness = RosHarness(envelope_file=str(envelope_file), allowed_hosts="cockpit.example, Panel.Local:9000")
+    try:
+        port = int(harness.display.url.rsplit(":", 1)[1].strip("/"))
+
+        async def status(http: aiohttp.ClientSession, host: str, path: str = "") -> tuple[int, str]:
+            async with http.get(harness.display.url + path, headers={"Host": host}) as response:
+                return response.status, await response.text()
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http:
+                for host in (f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}", f"Cockpit.Example:{port}"):
+                    assert (await status(http, host))[0] == 200, host
+                assert (await status(http, "panel.local:9000", "app.js"))[0] == 200
+                for host in ("evil.example", f"evil.example:{port}", f"127.0.0.1:{port + 1}", "localhost", ""):
+                    code, text = await status(http, host)
+                    assert code == 421 and "not served here" in text, host
+                with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                    async with http.ws_connect(websocket_url(harness.display), headers={"Host": "evil.example"}):
+                        pass
+                assert refused.value.status == 421
+
+        asyncio.run(scenario())
     finally:
         harness.close()
 

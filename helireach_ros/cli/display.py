@@ -2,7 +2,8 @@
 
 The page is at ``http://127.0.0.1:8080/`` by default; only an explicit ``--bind`` makes it listen on anything
 but loopback. ``--hold`` keeps the page up after Ctrl-C/SIGTERM stops ROS (last data shown, banner NO DATA,
-marked held) until a second Ctrl-C/SIGTERM. Options left out keep the node's parameter defaults
+marked held) until a second Ctrl-C/SIGTERM. Requests whose ``Host`` header is not loopback, the bound address or an
+``--allowed-host`` name (with the port) get 421. Options left out keep the node's parameter defaults
 (see :class:`helireach_ros.display.node.CockpitDisplay`). Exit codes: 0 after Ctrl-C/SIGTERM, 1 the page
 cannot be served (port taken), 2 bad input (``--port`` outside 0-65535, an out-of-range ``--stale-after``).
 """
@@ -34,7 +35,17 @@ def register(subparsers: Any) -> None:
     parser.add_argument("--airframe", default=None, help="airframe for rotor limits (default: the envelope's)")
     parser.add_argument("--state-topic", default=None, help="nav_msgs/Odometry state topic (default /helireach/state)")
     parser.add_argument(
-        "--stale-after", type=float, default=None, metavar="S", help="NO DATA after S s of silence (default 2)"
+        "--stale-after", type=float, default=None, metavar="S", help="STALE after S s of a silent source (default 2)"
+    )
+    parser.add_argument(
+        "--allowed-host",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="also answer this Host header name (repeatable; for a non-loopback --bind, e.g. the machine's name)",
+    )
+    parser.add_argument(
+        "--rotor-caution", type=float, default=None, metavar="PCT", help="amber band inside each rotor limit, %% (3)"
     )
     parser.add_argument("--hold", action="store_true", help="keep serving the last data after ROS stops")
     parser.set_defaults(handler=run)
@@ -65,6 +76,8 @@ def run(arguments: argparse.Namespace) -> int:
         "airframe": arguments.airframe,
         "state_topic": arguments.state_topic,
         "stale_after_s": arguments.stale_after,
+        "allowed_hosts": ",".join(arguments.allowed_host) if arguments.allowed_host else None,
+        "rotor_caution_pct": arguments.rotor_caution,
     }
     overrides = [Parameter(name, value=value) for name, value in given.items() if value is not None]
     try:  # args=[]: the helireach command line is not a ROS command line

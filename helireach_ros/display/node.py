@@ -10,16 +10,18 @@ times per second and at least every ``heartbeat`` (so a page can tell a silent s
 is queued per message: a 60 Hz (or 6 kHz) state stream costs each page at most one frame per send interval, the
 rest are dropped, and a page that cannot keep up only slows its own sender.
 
-The status banner follows ``/helireach/safety_status`` only: OK → SAFE, WARN → CAUTION, ERROR → AVOID,
-STALE (or any unknown level, or silence longer than ``stale_after_s``) → NO DATA. The page applies the same
-silence rule to the WebSocket itself.
+The banner follows the flight phase (:mod:`helireach_ros.core.flight_phase`): in NORMAL it is
+``/helireach/safety_status`` (OK → SAFE, WARN → CAUTION, ERROR → AVOID, STALE or unknown → NO DATA); in
+AUTOROTATION the plan; LANDED the touchdown result (``/helireach/touchdown``, else from the state); ENDED the
+recovery; STALE when a streaming source (state, rotor, safety status, failure episode) is silent longer than
+``stale_after_s``. The page applies the same silence rule to the WebSocket itself.
 
 Wire format (JSON text frames, SI units; the page converts to ft/kt for people)::
 
     {"config": {...},      # on connect and on change: units, stale_after_s, rotor limits, airframe
      "envelope": {...},    # on connect and on change: H-V grid, status codes, boundary, or an error
      "plan": {...} | null, # on change: trajectory, predicted path, plan status
-     "live": {...}}        # every frame: status banner, state, rotor, failure, episode, time to touchdown
+     "live": {...}}        # every frame: phase banner, status, state, rotor, failure, episode, touchdown, cue
 
 Run: ``helireach display`` or ``python -m helireach_ros.display.node --ros-args -p port:=8080``.
 """
@@ -34,6 +36,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Any
 
+import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
@@ -47,7 +50,18 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
+from helireach_ros.core.flight_phase import (
+    CueEvent,
+    PhaseInputs,
+    PlanVerdictInput,
+    TouchdownFromState,
+    TouchdownResult,
+    decide_phase,
+    next_cue,
+    plan_cue_events,
+)
 from helireach_ros.core.units import FT, KT
+from helireach_ros.display.pilot_units import axis_margins, thrust_scale
 from helireach_ros.display.sections import (
     envelope_section,
     episode_section,
@@ -57,6 +71,7 @@ from helireach_ros.display.sections import (
     rotor_limits_section,
     safety_status_section,
     to_json,
+    touchdown_section,
     trajectory_section,
 )
 from helireach_ros.display.server import DisplayServerError, PageServer
@@ -78,6 +93,8 @@ __all__ = [
 DEFAULT_PORT = 8080
 DEFAULT_BIND = "127.0.0.1"
 _PLAN_STAMP_TOLERANCE_S = 10.0  # a plan stamped further from the receipt time uses the receipt time instead
+# A state at or below this height is on the ground (the monitor's landed_height default, msg_docs/...episode.md).
+_CONTACT_HEIGHT_M = 0.3
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -106,6 +123,10 @@ class _Latest:
     path: _Received | None = None
     plan_status: _Received | None = None
     episode: _Received | None = None
+    touchdown: _Received | None = None
+    touchdown_from_state: TouchdownFromState | None = None
+    cue_events: tuple[CueEvent, ...] = ()
+    margins: dict[str, Any] | None = None
     plan_reference: float | None = None  # monotonic time of the plan's t = 0
     held: bool = False
     versions: dict[str, int] = field(default_factory=lambda: {"config": 1, "envelope": 1, "plan": 1})
@@ -118,8 +139,9 @@ class CockpitDisplay(Node):
     only when given), ``envelope_file`` (default: the shipped envelope), ``airframe`` (rotor limits; default: the
     envelope's airframe), ``state_topic`` (``/helireach/state``; ``/vehicle/odometry`` has the same layout),
     ``rotor_topic`` (``/vehicle/rotor``; the monitor's ``/helireach/rotor_state`` has the same layout),
-    ``stale_after_s`` (NO DATA after this long without a safety status), ``max_update_rate_hz`` (frames per
-    second per page).
+    ``stale_after_s`` (STALE after this long without a message of a streaming source), ``max_update_rate_hz``
+    (frames per second per page), ``allowed_hosts`` (more ``Host`` header names, comma separated, for a
+    non-loopback bind), ``rotor_caution_pct`` (amber band inside each rotor limit, % of Ω₀).
 
     Raises:
         DisplayServerError: if the web server cannot listen on ``bind:port``.
@@ -143,12 +165,24 @@ class CockpitDisplay(Node):
         self._max_update_rate_hz = declare(
             "max_update_rate_hz", 25.0, "most frames per second sent to one page", (1.0, 120.0)
         )
+        allowed_hosts = declare(
+            "allowed_hosts", "", "more Host header names the page answers, comma separated (e.g. for bind 0.0.0.0)"
+        )
+        self._rotor_caution_pct = declare(
+            "rotor_caution_pct", 3.0, "amber caution band inside each rotor speed limit, % of nominal", (0.0, 15.0)
+        )
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._state_topic = state_topic
         envelope, envelope_data = self._load_envelope()
         self._envelope_id = envelope_data.get("envelope_id")
+        self._envelope = envelope
+        self._envelope_safe = None if envelope is None else np.asarray(envelope.status) == "safe"
         self._config = self._config_section(envelope, envelope_data)
+        limits = self._touchdown_limits or {}
+        self._latest.touchdown_from_state = TouchdownFromState(
+            _CONTACT_HEIGHT_M, limits.get("max_descent_rate_ms"), limits.get("max_forward_speed_ms")
+        )
         self._config_json = to_json(self._config)
         self._envelope_json = to_json(envelope_data)
         self._plan_json = "null"
@@ -166,6 +200,7 @@ class CockpitDisplay(Node):
             (PathMsg, rm.TOPIC_LANDING_PATH, self._on_path, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan_status, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.EVENT_QOS),
+            (DiagnosticStatus, rm.TOPIC_TOUCHDOWN, self._on_touchdown, rm.LATCHED_QOS),
         ):
             qos_watch.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
 
@@ -178,6 +213,7 @@ class CockpitDisplay(Node):
                 self._frame,
                 *self._frame_timing(),
                 log_warning=self.get_logger().warning,
+                allowed_hosts=[name for name in allowed_hosts.split(",") if name.strip()],
             )
         except DisplayServerError:
             super().destroy_node()
@@ -232,8 +268,9 @@ class CockpitDisplay(Node):
         return envelope, {**section, "file": str(path)}
 
     def _config_section(self, envelope: Any, envelope_data: Mapping[str, Any]) -> dict[str, Any]:
-        """Units, staleness and rotor limits (explicit ``airframe`` → envelope metadata → envelope's airframe)."""
-        rotor_limits, airframe_label = None, str(envelope_data.get("airframe", ""))
+        """Units, staleness, rotor limits (explicit ``airframe`` → envelope metadata → envelope's airframe),
+        touchdown limits and the thrust scale (from the airframe file)."""
+        rotor_limits, airframe_label, airframe = None, str(envelope_data.get("airframe", "")), None
         try:
             from helireach_ros.core.airframe import load_airframe
 
@@ -242,17 +279,55 @@ class CockpitDisplay(Node):
                 rotor_limits, airframe_label = rotor_limits_section(airframe=airframe), airframe.name
             elif envelope is not None:
                 rotor_limits = rotor_limits_section(metadata=getattr(envelope, "metadata", None))
-                if rotor_limits is None and airframe_label:
-                    rotor_limits = rotor_limits_section(airframe=load_airframe(airframe_label))
+                if airframe_label:
+                    airframe = load_airframe(airframe_label)
+                    rotor_limits = rotor_limits or rotor_limits_section(airframe=airframe)
         except Exception as error:  # the gauge then shows the speed without limits
-            self.get_logger().error(f"rotor speed limits unavailable: {type(error).__name__}: {error}")
+            self.get_logger().error(f"airframe (rotor, touchdown limits) unavailable: {type(error).__name__}: {error}")
+        if rotor_limits is not None:
+            rotor_limits = {**rotor_limits, "caution_pct": self._rotor_caution_pct}
+        touchdown_limits, thrust = None, None
+        if airframe is not None:
+            touchdown_limits = {
+                "max_descent_rate_ms": airframe.limits.max_descent_rate,
+                "max_forward_speed_ms": airframe.limits.max_forward_speed,
+            }
+            thrust = {
+                "scale_pct": thrust_scale(
+                    airframe.air_density,
+                    airframe.disk_area,
+                    airframe.rotor_radius,
+                    airframe.nominal_rotor_speed,
+                    airframe.gross_weight,
+                ),
+                "source": f"airframe {airframe.name}",
+            }
+        self._touchdown_limits, self._airframe = touchdown_limits, airframe
         return {
             "units": {"m_per_ft": FT, "ms_per_kt": KT},
             "stale_after_s": self._stale_after_s,
             "rotor_limits": rotor_limits,
+            "touchdown_limits": touchdown_limits,
+            "thrust": thrust,
             "airframe": airframe_label,
             "state_topic": self.resolve_topic_name(self._state_topic),
         }
+
+    def _thrust_scale_for_plan(self, status: Mapping[str, Any]) -> float | None:
+        """The thrust scale for the plan's own weight and density altitude (None: use the airframe file's)."""
+        weight, density_altitude = status.get("gross_weight_n"), status.get("density_altitude_m")
+        if self._airframe is None or weight is None or density_altitude is None:
+            return None
+        from helireach_ros.core.airframe import isa_density
+
+        airframe = self._airframe
+        return thrust_scale(
+            isa_density(density_altitude),
+            airframe.disk_area,
+            airframe.rotor_radius,
+            airframe.nominal_rotor_speed,
+            weight,
+        )
 
     # -- ROS callbacks (any executor thread) -------------------------------------------------------------
     def _never_raising(self, callback: Callable[[Any], None], topic: str) -> Callable[[Any], None]:
@@ -295,12 +370,42 @@ class CockpitDisplay(Node):
             "height_m": finite(reading.height),
             "speed_ms": finite(reading.forward_speed),
             "climb_ms": finite(reading.climb_rate),
+            "distance_m": finite(reading.distance),
         }
+        margins = None
+        if self._envelope is not None and content["height_m"] is not None and content["speed_ms"] is not None:
+            # judged as on the ground below 0 m, as the status node does
+            margins = axis_margins(
+                self._envelope.heights,
+                self._envelope.speeds,
+                self._envelope_safe,
+                max(content["height_m"], 0.0),
+                content["speed_ms"],
+            )
 
         def update(latest: _Latest, now: float) -> None:
             latest.state = _Received(content, now)
+            latest.margins = margins
+            if latest.touchdown_from_state is not None and self._in_failure_episode(latest):
+                latest.touchdown_from_state.observe(
+                    content["height_m"], content["climb_ms"], content["speed_ms"], now
+                )
 
         self._store(update)
+
+    @staticmethod
+    def _in_failure_episode(latest: _Latest) -> bool:
+        """The episode says failed or landed (the monitor may say landed first), or (none heard) a failure came."""
+        if latest.episode is not None:
+            return latest.episode.content.get("phase") in ("failed", "landed")
+        return latest.failure is not None
+
+    @staticmethod
+    def _start_episode(latest: _Latest) -> None:
+        """A new failure episode: the previous touchdown no longer applies."""
+        latest.touchdown = None
+        if latest.touchdown_from_state is not None:
+            latest.touchdown_from_state.reset()
 
     def _on_rotor(self, message: JointState) -> None:
         try:
@@ -314,21 +419,42 @@ class CockpitDisplay(Node):
         self._store(update)
 
     def _on_failure(self, message: Header) -> None:
-        failure_stamp = rm.stamp_nanoseconds(message.stamp) * 1e-9
+        failure_stamp_ns = rm.stamp_nanoseconds(message.stamp)
 
         def update(latest: _Latest, now: float) -> None:
-            latest.failure = _Received({"stamp_s": failure_stamp}, now)
-            plan = latest.trajectory
-            # a plan stamped before this failure belongs to an earlier one: clear it until the new plan arrives
-            if plan is not None and 0.0 < plan.content.get("stamp_s", 0.0) < failure_stamp:
+            latest.failure = _Received({"stamp_s": failure_stamp_ns * 1e-9}, now)
+            self._start_episode(latest)
+            # a plan of an earlier failure must not stand for this one: cleared until the new plan arrives
+            if self._plan_of_earlier_failure(latest, failure_stamp_ns):
                 latest.trajectory = latest.path = latest.plan_status = None
                 latest.plan_reference = None
+                latest.cue_events = ()
             self._rebuild_plan(latest)
 
         self._store(update)
 
+    @staticmethod
+    def _plan_of_earlier_failure(latest: _Latest, failure_stamp_ns: int) -> bool:
+        """Whether the stored plan belongs to a failure before ``failure_stamp_ns``.
+
+        The plan status' ``failure_stamp_ns`` decides when it has one (a standby plan is stamped before the
+        failure); else the trajectory's stamp (planned from a state before this failure: an earlier one); a plan
+        status alone, with neither, is an earlier one's.
+        """
+        if latest.plan_status is not None:
+            try:
+                return int(latest.plan_status.content["values"]["failure_stamp_ns"]) < failure_stamp_ns
+            except (KeyError, ValueError):
+                pass
+        if latest.trajectory is not None:
+            return 0 < latest.trajectory.content.get("stamp_s", 0.0) * 1e9 < failure_stamp_ns - 1e3
+        return latest.plan_status is not None or latest.path is not None
+
     def _on_trajectory(self, message: JointTrajectory) -> None:
         section = trajectory_section(message)
+        events = ()
+        if "error" not in section:
+            events = plan_cue_events(section["t_s"], section["collective"], section["pitch_rad"])
         now_ros = self.get_clock().now().nanoseconds * 1e-9
         stamp = section.get("stamp_s", 0.0)
 
@@ -337,6 +463,7 @@ class CockpitDisplay(Node):
             # t = 0 of the plan: its stamp if plausible on our clock, else when it arrived
             lag = now_ros - stamp
             latest.plan_reference = now - lag if stamp > 0 and 0.0 <= lag <= _PLAN_STAMP_TOLERANCE_S else now
+            latest.cue_events = events
             self._rebuild_plan(latest)
 
         self._store(update)
@@ -345,6 +472,11 @@ class CockpitDisplay(Node):
         content = episode_section(message)
 
         def update(latest: _Latest, now: float) -> None:
+            previous = latest.episode.content if latest.episode is not None else {}
+            if content["phase"] == "failed" and (
+                previous.get("phase") != "failed" or previous.get("episode_id") != content["episode_id"]
+            ):
+                self._start_episode(latest)
             latest.episode = _Received(content, now)
 
         self._store(update)
@@ -353,7 +485,17 @@ class CockpitDisplay(Node):
         self._store_plan_part("path", path_section(message))
 
     def _on_plan_status(self, message: DiagnosticStatus) -> None:
-        self._store_plan_part("plan_status", plan_status_section(message))
+        section = plan_status_section(message)
+        section["thrust_scale_pct"] = self._thrust_scale_for_plan(section)
+        self._store_plan_part("plan_status", section)
+
+    def _on_touchdown(self, message: DiagnosticStatus) -> None:
+        content = touchdown_section(message)
+
+        def update(latest: _Latest, now: float) -> None:
+            latest.touchdown = _Received(content, now)
+
+        self._store(update)
 
     def _store_plan_part(self, part: str, section: dict[str, Any]) -> None:
         def update(latest: _Latest, now: float) -> None:
@@ -391,7 +533,7 @@ class CockpitDisplay(Node):
         return "{" + ",".join(parts) + "}", versions
 
     def _live_section(self, latest: _Latest, now: float) -> dict[str, Any]:
-        """What changes every frame: the banner (with staleness decided here), state, rotor, plan timing."""
+        """What changes every frame: the phase banner (staleness decided here), status, state, rotor, plan timing."""
         stale_after = self._stale_after_s
 
         def age(received: _Received | None) -> float | None:
@@ -407,7 +549,41 @@ class CockpitDisplay(Node):
         if latest.held:
             banner.update(level="nodata", message="display held: ROS stopped, showing the last data")
         mismatch = bool(banner.get("envelope_id") and self._envelope_id and banner["envelope_id"] != self._envelope_id)
+        plan_clock = None
+        if latest.trajectory is not None and latest.plan_reference is not None:
+            plan_clock = self._plan_clock(latest, now)
+        touchdown = self._touchdown_result(latest, now)
+        status_message = str(latest.status.content.get("message", "")) if latest.status is not None else ""
+        phase = decide_phase(
+            PhaseInputs(
+                source_ages=(
+                    ("state", age(latest.state)),
+                    ("rotor", age(latest.rotor)),
+                    ("safety status", status_age),
+                    ("failure episode", age(latest.episode)),
+                ),
+                stale_after_s=stale_after,
+                status_level=latest.status.content["level"] if latest.status is not None else None,
+                status_message=("ENVELOPE MISMATCH \u00b7 " if mismatch else "") + status_message,
+                episode_phase=latest.episode.content["phase"] if latest.episode is not None else None,
+                failure_event=latest.failure is not None,
+                plan=self._plan_verdict(latest),
+                plan_remaining_s=plan_clock["time_to_touchdown_s"] if plan_clock else None,
+                touchdown=touchdown,
+                held=latest.held,
+            )
+        )
+        cue = None
+        if phase.phase.value == "autorotation" and plan_clock is not None:
+            cue = next_cue(latest.cue_events, plan_clock["elapsed_s"])
         live: dict[str, Any] = {
+            "phase": {
+                "phase": phase.phase.value,
+                "level": phase.level,
+                "word": phase.word,
+                "detail": phase.detail,
+                "silent": list(phase.silent),
+            },
             "status": {
                 **banner,
                 "age_s": status_age,
@@ -418,7 +594,10 @@ class CockpitDisplay(Node):
             "rotor": None,
             "failure": None,
             "episode": None,
-            "plan_clock": None,
+            "plan_clock": plan_clock,
+            "cue": cue,
+            "touchdown": None if touchdown is None else vars(touchdown),
+            "margins": latest.margins,
             "held": latest.held,
         }
         if latest.state is not None:
@@ -437,9 +616,44 @@ class CockpitDisplay(Node):
             live["failure"] = {"age_s": age(latest.failure)}
         if latest.episode is not None:
             live["episode"] = {**latest.episode.content, "stale": age(latest.episode) > stale_after}
-        if latest.trajectory is not None and latest.plan_reference is not None:
-            live["plan_clock"] = self._plan_clock(latest, now)
         return live
+
+    @staticmethod
+    def _plan_verdict(latest: _Latest) -> PlanVerdictInput | None:
+        """The plan status for the banner; a trajectory without one counts as unverified (never as safe)."""
+        if latest.plan_status is None:
+            if latest.trajectory is None:
+                return None
+            return PlanVerdictInput(status="unverified", level="caution", message="no plan status")
+        status = latest.plan_status.content
+        return PlanVerdictInput(
+            status=status.get("status"),
+            level=status.get("level"),
+            verified=status.get("verified"),
+            fallback=status.get("fallback"),
+            late=status.get("late"),
+            standby=status.get("standby"),
+            robust=status.get("robust"),
+            message=str(status.get("message") or ""),
+        )
+
+    @staticmethod
+    def _touchdown_result(latest: _Latest, now: float) -> TouchdownResult | None:
+        """The vehicle's touchdown report of this episode, else the one found in the state stream, else None."""
+        if latest.touchdown is not None:
+            report = latest.touchdown.content
+            return TouchdownResult(
+                "touchdown",
+                report["within_limits"],
+                report["descent_rate_ms"],
+                report["forward_speed_ms"],
+                report["max_descent_rate_ms"],
+                report["max_forward_speed_ms"],
+                report["rotor_speed_pct"],
+                report["time_after_failure_s"],
+                str(report.get("reason") or ""),
+            )
+        return latest.touchdown_from_state.result(now) if latest.touchdown_from_state is not None else None
 
     @staticmethod
     def _plan_clock(latest: _Latest, now: float) -> dict[str, Any]:

@@ -32,6 +32,7 @@ __all__ = [
     "rotor_limits_section",
     "safety_status_section",
     "to_json",
+    "touchdown_section",
     "trajectory_section",
 ]
 
@@ -301,6 +302,10 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
         "state_delay_s": finite(values.get("state_delay_s")),
         "touchdown_descent_rate_ms": finite(values.get("predicted_touchdown_descent_rate_m_s")),
         "touchdown_forward_speed_ms": finite(values.get("predicted_touchdown_forward_speed_m_s")),
+        "standby": _parse_bool(values.get("standby")),
+        "robust": _parse_bool(values.get("robust")),  # a later plan kind: read if sent, never inferred
+        "gross_weight_n": finite(values.get("gross_weight_n")),
+        "density_altitude_m": finite(values.get("density_altitude_m")),
         "values": values,
     }
 
@@ -320,6 +325,28 @@ def episode_section(message: DiagnosticStatus) -> dict[str, Any]:
         "phase": state.phase.value,
         "episode_id": state.episode_id,
         "flag_changes": state.flag_changes,
+        "started_ns": state.started_ns,
+        "ended_ns": state.ended_ns,
+        "level": banner_level(message.level),
+        "message": str(message.message),
+    }
+
+
+def touchdown_section(message: DiagnosticStatus) -> dict[str, Any]:
+    """The vehicle's touchdown report from ``/helireach/touchdown`` (``msg_docs/helireach_touchdown.md``), SI.
+
+    ``within_limits`` is None when the report does not say (the page then says the result is unknown).
+    """
+    values = rm.status_values(message)
+    return {
+        "within_limits": _parse_bool(values.get("within_limits")),
+        "descent_rate_ms": finite(values.get("descent_rate_m_s")),
+        "forward_speed_ms": finite(values.get("forward_speed_m_s")),
+        "max_descent_rate_ms": finite(values.get("max_descent_rate_m_s")),
+        "max_forward_speed_ms": finite(values.get("max_forward_speed_m_s")),
+        "rotor_speed_pct": finite(values.get("rotor_speed_pct")),
+        "time_after_failure_s": finite(values.get("time_after_failure_s")),
+        "reason": values.get("reason", ""),
         "level": banner_level(message.level),
         "message": str(message.message),
     }

@@ -3,19 +3,24 @@
 It serves the three page files in ``web/`` (nothing else is reachable) with strict security headers and
 one rate-limited, latest-value-only sender per connected page; it knows nothing of ROS (the node hands
 it a ``frame`` function).
+
+**Host check** (DNS rebinding: a web site whose name resolves to 127.0.0.1 would otherwise read the page): every
+request's ``Host`` header must be one of ``127.0.0.1``, ``localhost``, ``[::1]``, the bound address, or an
+``allowed_hosts`` entry, each with the server's port (a bare name only when the port is 80; an entry that
+carries its own port must match exactly). Anything else gets ``421 Misdirected Request`` with a short text.
 """
 
 from __future__ import annotations
 
 import asyncio
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from importlib import resources as importlib_resources
 from pathlib import Path
 
 from aiohttp import WSCloseCode, WSMsgType, web
 
-__all__ = ["DisplayServerError", "PageServer", "web_directory"]
+__all__ = ["DisplayServerError", "PageServer", "allowed_host_headers", "web_directory"]
 
 # Which page file each URL serves: nothing else in the package (or on disk) is reachable.
 _WEB_FILES: dict[str, tuple[str, str]] = {
@@ -38,6 +43,31 @@ _MAX_INCOMING_MESSAGE_BYTES = 4096  # the page sends nothing; a client that does
 _SEND_TIMEOUT_S = 10.0  # a page that cannot take one frame in this long is disconnected
 
 
+_LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "[::1]")
+
+
+def _host_literal(host: str) -> str:
+    """A host as it appears in a Host header (IPv6 addresses in brackets)."""
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
+
+
+def allowed_host_headers(bind: str, port: int, extra_hosts: Sequence[str] = ()) -> frozenset[str]:
+    """The ``Host`` header values the server answers (lower case; see the module docstring)."""
+    allowed: set[str] = set()
+    for host in (*_LOOPBACK_HOSTS, bind, *extra_hosts):
+        host = host.strip().lower()
+        if not host:
+            continue
+        if (host.startswith("[") and "]:" in host) or (host.count(":") == 1 and not host.startswith("[")):
+            allowed.add(host)  # an entry with its own port
+            continue
+        literal = _host_literal(host)
+        allowed.add(f"{literal}:{port}")
+        if port == 80:
+            allowed.add(literal)
+    return frozenset(allowed)
+
+
 class DisplayServerError(RuntimeError):
     """The web server could not start (address in use, bad bind address, missing page files)."""
 
@@ -58,6 +88,8 @@ class PageServer:
         min_interval_s: shortest time between two frames to one page.
         heartbeat_s: longest time between two frames to one page.
         log_warning: where to report page errors.
+        allowed_hosts: more host names (or ``name:port``) the ``Host`` header may carry, e.g. for a
+            non-loopback bind; loopback and the bound address are always allowed.
     """
 
     def __init__(
@@ -68,8 +100,11 @@ class PageServer:
         min_interval_s: float,
         heartbeat_s: float,
         log_warning: Callable[[str], None],
+        allowed_hosts: Sequence[str] = (),
     ) -> None:
         self._frame = frame
+        self._extra_hosts = tuple(allowed_hosts)
+        self._allowed_hosts: frozenset[str] = frozenset()  # set once the port is known
         self.min_interval_s = min_interval_s
         self.heartbeat_s = heartbeat_s
         self._log_warning = log_warning
@@ -107,7 +142,7 @@ class PageServer:
         self._loop.close()
 
     async def _start(self, bind: str, port: int) -> None:
-        app = web.Application()
+        app = web.Application(middlewares=[self._check_host])
         for route in _WEB_FILES:
             app.router.add_get(route, self._serve_file)
         app.router.add_get("/ws", self._serve_websocket)
@@ -116,6 +151,14 @@ class PageServer:
         await web.TCPSite(self._runner, bind, port, reuse_address=True).start()
         host, bound_port = self._runner.addresses[0][:2]
         self.address = (str(host), int(bound_port))
+        self._allowed_hosts = allowed_host_headers(bind, int(bound_port), self._extra_hosts)
+
+    @web.middleware
+    async def _check_host(self, request: web.Request, handler: Callable) -> web.StreamResponse:
+        host = (request.headers.get("Host") or "").strip().lower()
+        if host not in self._allowed_hosts:
+            return web.Response(status=421, text=f"host {host[:80]!r} is not served here", headers=_SECURITY_HEADERS)
+        return await handler(request)
 
     async def _cleanup(self) -> None:
         for socket in list(self._sockets):

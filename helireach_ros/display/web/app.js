@@ -27,6 +27,8 @@
     pitch: "#ffd54f",
     rotorBand: "#00c853",
     rotorBad: "#e00000",
+    rotorCaution: "#ffb300",
+    ground: "#8d6e3f",
   };
 
   const model = {
@@ -38,6 +40,8 @@
     lastMessageAt: 0,
     trail: [], // {t, speedKt, heightFt, broken (no line from the previous point)}
     trailBroken: false,
+    lastPhase: null, // the phase before the data went stale
+    frozenTimer: null, // s after the failure at touchdown
   };
   // What the page currently shows, for people debugging and for the acceptance test.
   const view = { banner: "nodata", bannerDetail: "", marker: null, plan: { shown: false, pathPoints: 0 }, frames: 0, link: "connecting" };
@@ -134,56 +138,194 @@
   }
 
   // ---- banner and readouts (DOM) -----------------------------------------------------------------------
+  // The server decides the phase and its banner (helireach_ros/core/flight_phase.py); the page only adds its own
+  // link check: a lost or quiet link is STALE whatever the last frame said.
   function bannerState() {
     const now = performance.now();
     if (model.link !== "up") {
-      return { level: "nodata", detail: model.link === "down" ? "DISPLAY LINK LOST \u2014 RECONNECTING" : "CONNECTING", link: model.link };
+      const detail = model.link === "down" ? "DISPLAY LINK LOST \u2014 RECONNECTING" : "CONNECTING";
+      return { phase: "stale", level: "nodata", word: "STALE", detail, link: model.link };
     }
     const quietMs = now - model.lastMessageAt;
     if (quietMs > staleMs()) {
-      return { level: "nodata", detail: `NO DATA FROM DISPLAY SERVER FOR ${(quietMs / 1000).toFixed(1)} s`, link: "quiet" };
+      const detail = `NO DATA FROM DISPLAY SERVER FOR ${(quietMs / 1000).toFixed(1)} s`;
+      return { phase: "stale", level: "nodata", word: "STALE", detail, link: "quiet" };
     }
-    const status = model.live && model.live.status;
-    if (!status) return { level: "nodata", detail: "NO SAFETY STATUS", link: "up" };
-    const level = Object.prototype.hasOwnProperty.call(LEVEL_WORDS, status.level) ? status.level : "nodata";
-    let detail = (status.message || "").toUpperCase();
-    if (level === "nodata" && status.last_level && isNum(status.age_s)) {
+    const phase = model.live && model.live.phase;
+    if (!phase) return { phase: "stale", level: "nodata", word: "STALE", detail: "NO PHASE FROM THE SERVER", link: "up" };
+    const level = Object.prototype.hasOwnProperty.call(LEVEL_WORDS, phase.level) ? phase.level : "nodata";
+    let detail = phase.detail || "";
+    const status = model.live.status;
+    if (phase.phase === "normal" && level === "nodata" && status && status.last_level && isNum(status.age_s)) {
       detail += ` \u00b7 LAST ${LEVEL_WORDS[status.last_level] || "?"} ${status.age_s.toFixed(1)} s AGO`;
     }
-    if (status.envelope_mismatch) detail = "ENVELOPE MISMATCH \u00b7 " + detail;
-    return { level, detail, link: "up" };
+    return { phase: phase.phase, level, word: phase.word || LEVEL_WORDS[level], detail, link: "up" };
+  }
+
+  function setData(element, key, value) {
+    if (element.dataset[key] !== value) element.dataset[key] = value;
   }
 
   function updateDom() {
     const banner = bannerState();
-    const bannerElement = $("banner");
-    if (bannerElement.dataset.level !== banner.level) bannerElement.dataset.level = banner.level;
-    $("banner-word").textContent = LEVEL_WORDS[banner.level];
+    setData(document.body, "phase", banner.phase);
+    setData(document.body, "level", banner.level);
+    setData($("banner"), "level", banner.level);
+    $("banner-word").textContent = banner.word;
+    $("banner-word").classList.toggle("long", banner.word.length > 12);
     $("banner-detail").textContent = banner.detail;
+    view.phase = banner.phase;
     view.banner = banner.level;
+    view.word = banner.word;
     view.bannerDetail = banner.detail;
     view.link = banner.link;
-
-    const status = model.live && model.live.status;
-    $("margin-value").textContent = banner.level !== "nodata" && status ? fmt(status.margin, 0, true) : "---";
+    if (banner.phase !== "stale") model.lastPhase = banner.phase;
 
     const link = $("link-state");
     link.dataset.link = banner.link;
     link.textContent = `LINK: ${banner.link.toUpperCase()}`;
 
-    updateReadouts();
+    updateBannerSide(banner);
+    updateEngineStrip(banner);
+    updateReadouts(banner);
     updatePlanPanel();
     updateFooter();
   }
 
-  function updateReadouts() {
+  // Margins along the axes (feet above/below the H-V boundary at this speed, knots faster/slower at this height),
+  // only while the status rests on the envelope (it then carries a margin) and the page shows the H-V status.
+  function updateBannerSide(banner) {
+    const phase = banner.phase === "stale" ? model.lastPhase : banner.phase;
+    const flying = phase === "autorotation";
+    // the H-V margins mean something only while the H-V status is the banner (normal, ended)
+    $("banner-margin").hidden = phase === "autorotation" || phase === "landed";
+    $("banner-touchdown").hidden = !flying;
+    const clock = model.live && model.live.plan_clock;
+    $("banner-ttd").textContent = flying && clock ? fmt(clock.time_to_touchdown_s, 1) : "---";
+    const status = model.live && model.live.status;
+    const margins = model.live && model.live.margins;
+    const usable = !flying && banner.level !== "nodata" && status && isNum(status.margin) && margins;
+    const axes = [
+      ["margin-ft", "vertical", ft, "ABOVE", "BELOW"],
+      ["margin-kt", "horizontal", kt, "FASTER", "SLOWER"],
+    ];
+    view.margins = {};
+    for (const [id, axis, convert, positive, negative] of axes) {
+      const line = usable ? margins[axis] : null;
+      let value = "---";
+      let direction = "";
+      if (line && isNum(line.offset)) {
+        value = fmt(Math.abs(convert(line.offset)));
+        direction = line.offset >= 0 ? positive : negative;
+      } else if (line) {
+        direction = line.safe ? "CLEAR" : "NO SAFE";
+      }
+      $(id).textContent = value;
+      $(`${id}-dir`).textContent = direction;
+      view.margins[axis] = `${value} ${direction}`.trim();
+    }
+  }
+
+  // The engine failure is its own strip while the episode lasts: red in the air, grey once landed or recovered;
+  // the timer runs only in the air (it freezes at the touchdown).
+  function updateEngineStrip(banner) {
+    const live = model.live;
+    const phase = banner.phase === "stale" ? model.lastPhase : banner.phase;
+    const failure = live && live.failure;
+    const touchdown = live && live.touchdown;
+    const episode = live && live.episode;
+    const strip = $("engine-strip");
+    let word = null;
+    let timer = "";
+    if (phase === "autorotation") {
+      word = "ENGINE FAILURE";
+      timer = failure && isNum(failure.age_s) ? `T+${fmt(failure.age_s, 1)} s` : "";
+      model.frozenTimer = null;
+    } else if (phase === "landed") {
+      word = "ENGINE FAILURE \u00b7 LANDED";
+      if (touchdown && isNum(touchdown.time_after_failure_s)) {
+        model.frozenTimer = touchdown.time_after_failure_s;
+      } else if (episode && isNum(episode.started_ns) && isNum(episode.ended_ns)) {
+        model.frozenTimer = (episode.ended_ns - episode.started_ns) / 1e9;
+      } else if (model.frozenTimer === null && failure && isNum(failure.age_s)) {
+        model.frozenTimer = failure.age_s; // first frame seen landed
+      }
+      timer = isNum(model.frozenTimer) ? `TOUCHDOWN AT T+${fmt(model.frozenTimer, 1)} s` : "";
+    } else if (phase === "ended") {
+      word = "ENGINE RECOVERED \u00b7 EPISODE ENDED";
+    }
+    strip.hidden = !word;
+    setData(strip, "phase", banner.phase === "stale" ? "stale" : phase || "");
+    if (word) $("engine-word").textContent = word;
+    $("engine-timer").textContent = timer;
+    const cue = phase === "autorotation" && banner.phase !== "stale" && live ? live.cue : null;
+    $("cue").textContent = cue ? `CUE: ${cue}` : "";
+    $("cue").hidden = !cue;
+    view.engine = word;
+    view.cue = cue;
+    view.episode = episode ? episode.phase : null;
+  }
+
+  // The plan's controls now and one second ahead, piecewise constant as the vehicle flies them.
+  function planValueAt(values, t) {
+    const times = model.plan && model.plan.trajectory && model.plan.trajectory.t_s;
+    if (!times || !values || !isNum(t)) return null;
+    let value = null;
+    for (let i = 0; i < times.length; i += 1) {
+      if (isNum(times[i]) && times[i] <= t + 1e-9 && isNum(values[i])) value = values[i];
+      else if (isNum(times[i]) && times[i] > t) break;
+    }
+    return value;
+  }
+
+  // Thrust in % of weight: scale (100 ρA(Ω₀R)²/W, the plan's weight and density when it says, else the airframe
+  // file's) × C_T × (Ω/Ω₀)² with the measured rotor speed; Ω₀ when none is fresh (marked "@100 %").
+  function thrustPct(collective) {
+    const status = model.plan && model.plan.status;
+    const config = model.config && model.config.thrust;
+    const scale = status && isNum(status.thrust_scale_pct) ? status.thrust_scale_pct : config && config.scale_pct;
+    if (!isNum(scale) || !isNum(collective)) return { pct: null, assumed: false };
+    const rotor = model.live && model.live.rotor;
+    const limits = model.config && model.config.rotor_limits;
+    const measured = rotor && !rotor.stale && isNum(rotor.speed_rad_s) && limits;
+    const ratio = measured ? rotor.speed_rad_s / limits.nominal_rad_s : 1;
+    return { pct: scale * collective * ratio * ratio, assumed: !measured };
+  }
+
+  function updateReadouts(banner) {
     const state = model.live && model.live.state;
     const stale = !state || state.stale || model.link !== "up";
+    const phase = banner.phase === "stale" ? model.lastPhase : banner.phase; // stale: as the last phase, struck out
+    const descending = phase === "autorotation" || phase === "landed";
     $("height-value").textContent = state ? fmt(ft(state.height_m)) : "---";
     $("speed-value").textContent = state ? fmt(kt(state.speed_ms)) : "---";
-    $("climb-value").textContent = state && isNum(state.climb_ms) ? fmt(ft(state.climb_ms) * 60, 0, true) : "---";
+    $("climb-label").textContent = descending ? "DESCENT" : "V/S";
+    const climbFpm = state && isNum(state.climb_ms) ? ft(state.climb_ms) * 60 : null;
+    $("climb-value").textContent = climbFpm === null ? "---" : descending ? fmt(-climbFpm) : fmt(climbFpm, 0, true);
     $("state-age").textContent = !state ? "NO STATE" : state.stale ? "STALE" : "LIVE";
     document.querySelector(".readouts").classList.toggle("stale", stale);
+
+    const clock = model.live && model.live.plan_clock;
+    const flying = banner.phase === "autorotation" && planState() === "shown" && clock && isNum(clock.elapsed_s);
+    const trajectory = flying ? model.plan.trajectory : null;
+    const pitch = trajectory ? planValueAt(trajectory.pitch_rad, clock.elapsed_s) : null;
+    $("pitch-value").textContent = isNum(pitch) ? fmt((-pitch * 180) / Math.PI, 0, true) : "---"; // −θ: nose up +
+    const now = trajectory ? thrustPct(planValueAt(trajectory.collective, clock.elapsed_s)) : { pct: null };
+    const ahead = trajectory ? thrustPct(planValueAt(trajectory.collective, clock.elapsed_s + 1)) : { pct: null };
+    $("thrust-value").textContent = isNum(now.pct) ? fmt(now.pct) : "---";
+    let trend = "";
+    if (isNum(now.pct) && isNum(ahead.pct)) {
+      // the plan over the next second: up / down by more than 5 % of the weight, else steady
+      trend = ahead.pct - now.pct > 5 ? "\u25b2" : ahead.pct - now.pct < -5 ? "\u25bc" : "\u25b6";
+    }
+    $("thrust-trend").textContent = trend + (now.assumed && isNum(now.pct) ? " @100 %" : "");
+    view.readouts = {
+      climbLabel: $("climb-label").textContent,
+      climb: $("climb-value").textContent,
+      pitch: $("pitch-value").textContent,
+      thrust: $("thrust-value").textContent,
+      trend,
+    };
 
     const rotor = model.live && model.live.rotor;
     const limits = model.config && model.config.rotor_limits;
@@ -194,19 +336,34 @@
       rotorPanel.dataset.state = "none";
     } else {
       const rpm = (rotor.speed_rad_s * 60) / (2 * Math.PI);
-      $("rotor-value").textContent = limits ? fmt((100 * rotor.speed_rad_s) / limits.nominal_rad_s) : "---";
+      const pct = limits ? (100 * rotor.speed_rad_s) / limits.nominal_rad_s : null;
+      $("rotor-value").textContent = limits ? fmt(pct) : "---";
       $("rotor-rpm").textContent = `${fmt(rpm)} rpm` + (rotor.stale ? " \u00b7 STALE" : "") + (limits ? "" : " \u00b7 NO LIMITS");
-      if (rotor.stale || model.link !== "up") rotorPanel.dataset.state = "stale";
-      else if (!limits) rotorPanel.dataset.state = "none";
-      else if (rotor.speed_rad_s < limits.min_rad_s) rotorPanel.dataset.state = "low";
-      else if (rotor.speed_rad_s > limits.max_rad_s) rotorPanel.dataset.state = "high";
-      else rotorPanel.dataset.state = "ok";
+      rotorPanel.dataset.state = rotorState(rotor, limits, pct, phase);
     }
+    view.rotor = rotorPanel.dataset.state;
+  }
+
+  // ok (green), caution (amber: within caution_pct of a limit), low/high (red: beyond a limit); on the ground after
+  // the failure the rotor runs down by design: no colour ("ground").
+  function rotorState(rotor, limits, pct, phase) {
+    if (rotor.stale || model.link !== "up") return "stale";
+    if (!limits) return "none";
+    if (phase === "landed") return "ground";
+    const minPct = (100 * limits.min_rad_s) / limits.nominal_rad_s;
+    const maxPct = (100 * limits.max_rad_s) / limits.nominal_rad_s;
+    const band = isNum(limits.caution_pct) ? limits.caution_pct : 0;
+    if (pct < minPct) return "low";
+    if (pct > maxPct) return "high";
+    if (pct < minPct + band || pct > maxPct - band) return "caution";
+    return "ok";
   }
 
   function planState() {
     const plan = model.plan;
     if (!plan) return "none";
+    const phase = view.phase === "stale" ? model.lastPhase : view.phase;
+    if (phase === "landed") return "landed"; // on the ground: the plan (and its countdown) no longer applies
     if (plan.status && plan.status.status === "ended") return "ended"; // engine recovered: the plan is void
     if (!plan.trajectory) return "planning";
     if (plan.trajectory.error) return "error";
@@ -220,10 +377,12 @@
     const badge = $("plan-badge");
     $("plan-idle").hidden = state === "shown";
     $("plan-body").hidden = state !== "shown";
+    $("side-panel").hidden = state !== "shown";
     if (state === "none") $("plan-idle").textContent = "ENGINE NORMAL \u00b7 NO PLAN";
     if (state === "planning") $("plan-idle").textContent = "ENGINE FAILURE \u00b7 PLANNING\u2026";
     if (state === "error") $("plan-idle").textContent = `PLAN UNREADABLE: ${model.plan.trajectory.error}`.toUpperCase();
     if (state === "ended") $("plan-idle").textContent = "ENDED (ENGINE RECOVERED) \u00b7 NO PLAN";
+    if (state === "landed") $("plan-idle").textContent = "LANDED \u00b7 THE PLAN NO LONGER APPLIES";
     view.plan.shown = state === "shown";
     view.plan.state = state;
     if (state !== "shown") {
@@ -244,16 +403,20 @@
       text = "UNSAFE";
     } else if (status && status.verified === true) {
       kind = "verified";
-      text = "VERIFIED";
+      text = status.robust === true ? "ROBUST" : "VERIFIED";
+      if (status.standby === true) text = `STANDBY \u00b7 ${text}`;
     }
     if (status && status.late === true && kind === "verified") {
       kind = "late"; // verified from a state long after the failure: caution, never plain green
-      text = "VERIFIED \u00b7 LATE";
+      text += " \u00b7 LATE";
     }
+    // a plan is never shown green on a page whose data is stale or held
+    if (kind === "verified" && view.phase === "stale") kind = "stale";
     badge.hidden = false;
     badge.dataset.kind = kind;
     badge.textContent = text;
     view.plan.badge = text;
+    view.plan.badgeKind = kind;
 
     const clock = model.live && model.live.plan_clock;
     $("touchdown-value").textContent = clock ? fmt(clock.time_to_touchdown_s, 1) : "---";
@@ -279,20 +442,6 @@
     const envelope = model.envelope;
     $("airframe-label").textContent = config && config.airframe ? `AIRFRAME ${config.airframe.toUpperCase()}` : "";
     $("status-source").textContent = config && config.state_topic ? `STATE ${config.state_topic}` : "";
-    const failure = model.live && model.live.failure;
-    const episode = model.live && model.live.episode;
-    const phase = episode ? episode.phase : null;
-    let failureText = failure ? `ENGINE FAILURE T+${fmt(failure.age_s, 1)} s` : null;
-    if (phase === "failed" && !failure) failureText = "ENGINE FAILURE"; // the event came before this display started
-    if (phase === "ended") failureText = "ENGINE RECOVERED \u00b7 EPISODE ENDED";
-    else if (phase === "landed") failureText = "LANDED AFTER ENGINE FAILURE";
-    else if (phase === "no_flag") failureText = "NO ENGINE-FAILURE FLAG RECEIVED";
-    else if (phase === "unknown") failureText = "FAILURE EPISODE UNREADABLE";
-    const failureLabel = $("failure-label");
-    failureLabel.hidden = !failureText;
-    failureLabel.dataset.phase = phase || (failure ? "failed" : "");
-    if (failureText) failureLabel.textContent = failureText;
-    view.episode = phase;
     let label = "no envelope";
     if (envelope && envelope.available) {
       label = `envelope ${envelope.envelope_id}` + (envelope.method ? ` \u00b7 ${envelope.method}` : "");
@@ -316,6 +465,7 @@
       drawHv();
       drawRotor();
       drawPlanCharts();
+      drawSideView();
     });
   }
 
@@ -589,8 +739,11 @@
     if (limits) {
       const minPct = (100 * limits.min_rad_s) / limits.nominal_rad_s;
       const maxPct = (100 * limits.max_rad_s) / limits.nominal_rad_s;
-      context.fillStyle = COLORS.rotorBand;
+      const band = isNum(limits.caution_pct) ? limits.caution_pct : 0;
+      context.fillStyle = COLORS.rotorCaution; // amber inside each red limit, green between
       context.fillRect(x(minPct), barTop, x(maxPct) - x(minPct), barHeight);
+      context.fillStyle = COLORS.rotorBand;
+      context.fillRect(x(minPct + band), barTop, x(maxPct - band) - x(minPct + band), barHeight);
     }
     context.fillStyle = COLORS.axis;
     context.font = 'bold 13px "DejaVu Sans", Arial, sans-serif';
@@ -628,12 +781,20 @@
     const bottomReserve = compact ? 20 : 40; // time tick labels (and the axis title)
     const rowHeight = Math.max((height - top0 - gap - bottomReserve) / 2, 10);
     const rows = [
-      { values: trajectory.collective, label: "COLLECTIVE C\u209c", color: COLORS.collective, scale: 1 },
-      { values: trajectory.pitch_rad, label: "PITCH \u03b8 (deg, + nose down)", color: COLORS.pitch, scale: 180 / Math.PI },
+      {
+        values: trajectory.collective.map((c) => thrustPct(c).pct),
+        label: "THRUST, % OF WEIGHT (estimate)",
+        color: COLORS.collective,
+      },
+      {
+        values: trajectory.pitch_rad.map((p) => (isNum(p) ? (-p * 180) / Math.PI : null)), // −θ: nose up positive
+        label: "PITCH ATTITUDE, \u00b0 NOSE UP",
+        color: COLORS.pitch,
+      },
     ];
     rows.forEach((row, index) => {
       const top = top0 + index * (rowHeight + gap);
-      const values = row.values.map((v) => (isNum(v) ? v * row.scale : null));
+      const values = row.values.map((v) => (isNum(v) ? v : null));
       const finite = values.filter(isNum);
       let low = Math.min(0, ...finite);
       let high = Math.max(...finite, low + 1e-6);
@@ -694,6 +855,80 @@
         if (!compact) context.fillText("TIME SINCE PLAN START (s)", (frame.left + frame.right) / 2, frame.bottom + 21);
       }
     });
+  }
+
+  // Side view: height against distance along the track, the planned path (magenta), the touchdown point (TD)
+  // and the aircraft; the distance to the touchdown point is the path's last x minus the aircraft's x.
+  function drawSideView() {
+    const canvas = $("side-canvas");
+    const path = planState() === "shown" && model.plan.path;
+    view.side = null;
+    if (!path || path.error || canvas.clientHeight < 20) {
+      $("side-distance").textContent = "TO TOUCHDOWN ---";
+      return;
+    }
+    const { context, width, height } = prepareCanvas(canvas);
+    const points = [];
+    path.x_m.forEach((x, i) => {
+      if (isNum(x) && isNum(path.z_m[i])) points.push([ft(x), ft(Math.max(path.z_m[i], 0))]);
+    });
+    if (points.length < 2) return;
+    const state = model.live && model.live.state;
+    const aircraft = state && isNum(state.distance_m) && isNum(state.height_m) ? [ft(state.distance_m), ft(Math.max(state.height_m, 0))] : null;
+    const xs = points.map((p) => p[0]).concat(aircraft ? [aircraft[0]] : []);
+    const ys = points.map((p) => p[1]).concat(aircraft ? [aircraft[1]] : []);
+    const xMin = Math.min(...xs);
+    const xMax = Math.max(...xs, xMin + 1);
+    const yMax = Math.max(...ys, 10) * 1.1;
+    const fontPx = 13;
+    const frame = makeFrame(62, 8, width - 14, height - 36, xMin, xMax, 0, yMax);
+    context.fillStyle = COLORS.ground;
+    context.fillRect(frame.left, frame.y(0), frame.right - frame.left, 4);
+    context.strokeStyle = COLORS.grid;
+    context.fillStyle = COLORS.axis;
+    context.font = `${fontPx}px "DejaVu Sans", Arial, sans-serif`;
+    context.textAlign = "right";
+    context.textBaseline = "middle";
+    const yStep = niceStep(yMax, 3);
+    for (let y = 0; y <= yMax; y += yStep) {
+      context.beginPath();
+      context.moveTo(frame.left, frame.y(y));
+      context.lineTo(frame.right, frame.y(y));
+      context.stroke();
+      context.fillText(String(Number(y.toFixed(0))), frame.left - 6, frame.y(y));
+    }
+    context.textAlign = "center";
+    context.textBaseline = "top";
+    const xStep = niceStep(xMax - xMin, 6);
+    for (let x = Math.ceil(xMin / xStep) * xStep; x <= xMax; x += xStep) context.fillText(String(Number(x.toFixed(0))), frame.x(x), frame.bottom + 6);
+    context.fillText("DISTANCE (ft) \u00b7 HEIGHT (ft)", (frame.left + frame.right) / 2, frame.bottom + 20);
+    context.strokeStyle = COLORS.plan;
+    context.lineWidth = 3;
+    context.beginPath();
+    points.forEach(([x, y], i) => (i ? context.lineTo(frame.x(x), frame.y(y)) : context.moveTo(frame.x(x), frame.y(y))));
+    context.stroke();
+    const [tdX, tdY] = points[points.length - 1];
+    context.fillStyle = COLORS.plan;
+    context.fillRect(frame.x(tdX) - 6, frame.y(tdY) - 6, 12, 12);
+    context.font = 'bold 15px "DejaVu Sans", Arial, sans-serif';
+    context.textAlign = "right";
+    context.textBaseline = "bottom";
+    context.fillText("TD", frame.x(tdX) - 8, frame.y(tdY) - 6);
+    let distanceText = "TO TOUCHDOWN ---";
+    if (aircraft) {
+      const stale = state.stale || model.link !== "up";
+      context.fillStyle = stale ? COLORS.stale : COLORS.aircraft;
+      context.strokeStyle = "#000";
+      context.lineWidth = 2;
+      context.beginPath();
+      context.arc(frame.x(aircraft[0]), frame.y(aircraft[1]), 8, 0, 2 * Math.PI);
+      context.fill();
+      context.stroke();
+      const toGo = tdX - aircraft[0];
+      distanceText = `TO TOUCHDOWN ${fmt(Math.abs(toGo))} ft ${toGo >= 0 ? "AHEAD" : "BEHIND"}`;
+    }
+    $("side-distance").textContent = distanceText;
+    view.side = { points: points.length, distance: distanceText };
   }
 
   // The banner also depends on time (a quiet link), so re-evaluate it even without frames.
