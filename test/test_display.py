@@ -341,7 +341,7 @@ class VehicleAndStatus(Node):
         self.trajectory_publisher = self.create_publisher(JointTrajectory, "/helireach/landing_trajectory", LATCHED)
         self.path_publisher = self.create_publisher(PathMsg, "/helireach/landing_path", LATCHED)
         self.plan_status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/plan_status", LATCHED)
-        self.episode_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, RELIABLE)
+        self.episode_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.LATCHED_QOS)
         self.touchdown_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_TOUCHDOWN, LATCHED)
         self.create_timer(1.0 / 60.0, self._publish_vehicle)
         self.create_timer(0.1, self._publish_status)

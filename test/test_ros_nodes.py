@@ -144,6 +144,7 @@ def test_every_topic_has_its_documented_type_and_qos(no_ros_discovery) -> None:
         latched = [spec.name for spec in rm.TOPICS.values() if spec.qos.durability == DurabilityPolicy.TRANSIENT_LOCAL]
         assert set(latched) == {
             rm.TOPIC_SAFETY_STATUS,
+            rm.TOPIC_FAILURE_EPISODE,
             rm.TOPIC_LIVE_REACHABILITY,
             rm.TOPIC_LANDING_TRAJECTORY,
             rm.TOPIC_LANDING_PATH,

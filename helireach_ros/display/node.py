@@ -199,7 +199,7 @@ class CockpitDisplay(Node):
             (JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, self._on_trajectory, rm.LATCHED_QOS),
             (PathMsg, rm.TOPIC_LANDING_PATH, self._on_path, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan_status, rm.LATCHED_QOS),
-            (DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.EVENT_QOS),
+            (DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_TOUCHDOWN, self._on_touchdown, rm.LATCHED_QOS),
         ):
             qos_watch.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)

@@ -173,7 +173,7 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(TOPIC_STATE, "nav_msgs/msg/Odometry", STREAM_QOS, "helireach_monitor"),
         TopicSpec(TOPIC_ROTOR_STATE, "sensor_msgs/msg/JointState", STREAM_QOS, "helireach_monitor"),
         TopicSpec(TOPIC_FAILURE_EVENT, "std_msgs/msg/Header", EVENT_QOS, "helireach_monitor"),
-        TopicSpec(TOPIC_FAILURE_EPISODE, "diagnostic_msgs/msg/DiagnosticStatus", STREAM_QOS, "helireach_monitor"),
+        TopicSpec(TOPIC_FAILURE_EPISODE, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_monitor"),
         TopicSpec(
             TOPIC_SAFETY_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_envelope_status"
         ),

@@ -247,7 +247,9 @@ class EnvelopeStatusNode(Node):
         self._qos_watch.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
         self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
         self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY, self._on_live, rm.LATCHED_QOS)
-        self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.SENSOR_QOS)
+        self._qos_watch.create_subscription(
+            DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.LATCHED_QOS
+        )
         self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan, rm.LATCHED_QOS)
         self._qos_watch.create_subscription(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, self._on_diagnostics, rm.SENSOR_QOS)
         self.create_timer(publish_period, self._publish_steady)

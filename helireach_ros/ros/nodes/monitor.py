@@ -119,7 +119,7 @@ class VehicleMonitor(Node):
         self._rotor_publisher = self._qos_watch.create_publisher(JointState, rm.TOPIC_ROTOR_STATE, rm.STREAM_QOS)
         self._event_publisher = self._qos_watch.create_publisher(Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS)
         self._episode_publisher = self._qos_watch.create_publisher(
-            DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.STREAM_QOS
+            DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.LATCHED_QOS
         )
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER

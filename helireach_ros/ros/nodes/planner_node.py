@@ -234,7 +234,9 @@ class LandingPlannerNode(Node):
         self._qos_watch.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
         self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
         self._qos_watch.create_subscription(Header, rm.TOPIC_FAILURE_EVENT, self._on_failure_event, rm.EVENT_QOS)
-        self._qos_watch.create_subscription(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.EVENT_QOS)
+        self._qos_watch.create_subscription(
+            DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.LATCHED_QOS
+        )
         # A periodic check, never cancelled or reset from the solver thread (cancelling a timer that the
         # executor is about to fire raises inside the executor). Every half deadline:
         # the fallback goes out within 1.5 deadlines without waking the executor needlessly.
