@@ -96,6 +96,8 @@ def test_after_a_failure_only_the_current_plan_speaks() -> None:
     decision = decide(envelope=None, live=None, episode="failed", plan=verified)
     assert decision.level == "OK" and "standby plan verified" in decision.message
     assert decide(envelope=None, live=None, episode="failed", plan=PlanEvidence("fallback", False)).level == "ERROR"
+    late = decide(envelope=None, live=None, episode="failed", plan=PlanEvidence("safe", True, late=True))
+    assert late.level == "WARN" and "LATE" in late.message
     assert decide(envelope=safe_envelope, live=None, episode="landed").level == "STALE"
     assert decide(envelope=safe_envelope, live=None, episode="ended").level == "OK"
 

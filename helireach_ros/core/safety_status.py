@@ -29,7 +29,8 @@ with J above ``live_warn_value`` (a touchdown near a limit), ERROR anything else
 failed, solver error).
 
 After a failure (episode ``failed``) the status is the current plan's: OK for a replay-verified plan
-(standby or refined), ERROR for a fallback (never verified), an unverified or unsafe plan, or no plan yet.
+(standby or refined; WARN when it was made late), ERROR for a fallback (never verified), an unverified or
+unsafe plan, or no plan yet.
 ``landed``: STALE (the envelope does not apply on the ground). ``ended`` (engine recovered): the rules
 before a failure apply again.
 
@@ -113,12 +114,14 @@ class PlanEvidence:
         verified: a replay-verified safe plan.
         standby: made before the failure by the live evaluation.
         time_to_land_s: s.
+        late: made from a state stamped more than the planner's ``max_message_age`` after the failure.
     """
 
     status: str
     verified: bool
     standby: bool = False
     time_to_land_s: float = math.nan
+    late: bool = False
 
 
 @dataclass(frozen=True)
@@ -164,6 +167,8 @@ def _after_failure(plan: PlanEvidence | None) -> tuple[str, str, str]:
         return "ERROR", "ENGINE FAILURE: no landing plan yet", "plan"
     if plan.verified and plan.status == "safe":
         kind = "standby plan" if plan.standby else "landing plan"
+        if plan.late:  # verified for a state the aircraft was in later than the failure: not the whole story
+            return "WARN", f"ENGINE FAILURE: {kind} verified but LATE, land in {plan.time_to_land_s:.1f} s", "plan"
         return "OK", f"ENGINE FAILURE: {kind} verified, land in {plan.time_to_land_s:.1f} s", "plan"
     if plan.status == "fallback":
         return "ERROR", "ENGINE FAILURE: FALLBACK controls, not verified", "plan"

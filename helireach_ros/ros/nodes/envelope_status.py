@@ -176,6 +176,7 @@ def plan_evidence(values: dict[str, str], episode_started_ns: int | None) -> Pla
             verified=values.get("safe") == "true" and values.get("verified") == "true",
             standby=values.get("standby") == "true",
             time_to_land_s=float(values.get("time_to_land_s", "nan")),
+            late=float(values.get("late_by_s", "0")) > 0.0,  # a late *state* (not only after a fallback)
         )
     except ValueError:
         return None
