@@ -27,6 +27,7 @@ import os
 import threading
 import time
 from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any
@@ -41,6 +42,7 @@ from helireach_ros.core.settings import PlannerSettings
 __all__ = [
     "PRIORITY_FAILURE",
     "PRIORITY_LIVE",
+    "QUEUE_WAIT_LIMIT_S",
     "SUPERVISION_PERIOD_S",
     "SolverPool",
     "SolverPoolSettings",
@@ -53,6 +55,8 @@ PRIORITY_LIVE = 10
 """Priority of a live evaluation before any failure."""
 SUPERVISION_PERIOD_S = 0.01
 """How often the dispatcher checks for hung workers when nothing else wakes it, s."""
+QUEUE_WAIT_LIMIT_S = 60.0
+"""Longest :meth:`SolverPool.plan` waits for a worker to take its job (a restart takes a few seconds), s."""
 
 _READY = b"ready"
 _STOP = b"stop"
@@ -224,10 +228,18 @@ class SolverPool:
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
     ) -> LandingPlan:
-        """Solves and waits: :meth:`submit` then the result (queue time included in the wait)."""
+        """Solves and waits: :meth:`submit` then the result.
+
+        The wait is bounded (the job's timeout plus :data:`QUEUE_WAIT_LIMIT_S` in the queue, e.g. while a worker
+        restarts): beyond it :class:`SolverWorkerError`, so a caller never waits for ever.
+        """
         timeout = timeout_s or self.pool_settings.default_timeout_s
         future = self.submit(state, warm_start, priority, timeout)
-        return future.result(timeout=None)
+        try:
+            return future.result(timeout=timeout + QUEUE_WAIT_LIMIT_S)
+        except FutureTimeoutError:
+            future.cancel()
+            raise SolverWorkerError(f"no worker answered within {timeout + QUEUE_WAIT_LIMIT_S:g} s") from None
 
     def wait_ready(self, timeout_s: float, count: int = 1) -> bool:
         """Waits until at least ``count`` workers are ready (NLP built, warmed up); returns whether they are."""
@@ -323,25 +335,35 @@ class SolverPool:
 
     def _dispatch(self) -> None:
         while True:
-            with self._lock:
-                closed = self._closed
-            if closed:
-                self._stop_all()
-                return
-            with self._lock:
-                workers = list(self._workers)
-            now = time.monotonic()
-            for worker in workers:  # answers, deaths and time-outs first: a dead worker gets no new job
-                self._service(worker, now)
-            self._assign()
-            with self._lock:
-                workers = list(self._workers)
-            waitables: list[Any] = [self._wake_reader]
-            for worker in workers:
-                waitables += [worker.connection, worker.process.sentinel]
-            for ready in wait(waitables, timeout=SUPERVISION_PERIOD_S):
-                if ready == self._wake_reader:
-                    os.read(self._wake_reader, 4096)
+            try:
+                if self._dispatch_once():
+                    return
+            except Exception as error:  # the supervisor must outlive any surprise (e.g. no process can be started)
+                self.last_error = f"solver pool dispatcher: {type(error).__name__}: {error}"
+                time.sleep(0.1)
+
+    def _dispatch_once(self) -> bool:
+        """One pass: serve answers, deaths and time-outs, hand out jobs, wait. True when the pool is closed."""
+        with self._lock:
+            closed = self._closed
+        if closed:
+            self._stop_all()
+            return True
+        with self._lock:
+            workers = list(self._workers)
+        now = time.monotonic()
+        for worker in workers:  # answers, deaths and time-outs first: a dead worker gets no new job
+            self._service(worker, now)
+        self._assign()
+        with self._lock:
+            workers = list(self._workers)
+        waitables: list[Any] = [self._wake_reader]
+        for worker in workers:
+            waitables += [worker.connection, worker.process.sentinel]
+        for ready in wait(waitables, timeout=SUPERVISION_PERIOD_S):
+            if ready == self._wake_reader:
+                os.read(self._wake_reader, 4096)
+        return False
 
     def _service(self, worker: _Worker, now: float) -> None:
         """Reads a worker's answer, or replaces it when it died or its job timed out."""
