@@ -2,10 +2,10 @@
 
 Run: .venv/bin/python bench/live_status.py [--states 60] [--seconds 20] [--workers 2] [--seed 3]
 
-1. **Agreement.** A seeded random walk through non-trim states (heights 20–800 ft, speeds 0–120 kt, climb rates
-   −3,000…+1,500 ft/min, rotor speed 95–105 %), evaluated as the planner node's live evaluation does (each warm-
-   started from the previous one) and as ``helireach plan`` does (cold, in process): status agreement and the
-   largest |ΔJ|.
+1. **Agreement.** Two seeded random walks through non-trim states (heights 20–800 ft, speeds 0–120 kt, climb rates
+   −3,000…+1,500 ft/min, rotor speed 95–105 %; one from cruise, one from the hover avoid band), evaluated as the
+   planner node's live evaluation does (each warm-started from the previous one) and as ``helireach plan`` does
+   (cold, in process): status agreement and the largest |ΔJ|.
 2. **GIL.** The same warm live solves timed in process and through the solver pool, each with and without a busy
    Python thread in this process (what a busy rclpy executor is): ratios measured in this run.
 3. **Rate and CPU share.** The live evaluation at 5 Hz through the pool for ``--seconds``: rate achieved, solve
@@ -38,10 +38,11 @@ from helireach_ros.core.units import FT, KT
 FPM = FT / 60.0
 
 
-def random_walk(airframe, count: int, seed: int) -> list[np.ndarray]:
-    """Measured non-trim states (engine power = the trim power on that path) along a seeded random walk."""
+def random_walk(airframe, count: int, seed: int, start: tuple[float, float] = (500.0, 75.0)) -> list[np.ndarray]:
+    """Measured non-trim states (engine power = the trim power on that path) along a seeded random walk from
+    ``start`` (ft, kt)."""
     rng = np.random.default_rng(seed)
-    height, speed, climb, rotor = 500.0, 75.0, 0.0, 100.0
+    height, speed, climb, rotor = start[0], start[1], 0.0, 100.0
     states = []
     while len(states) < count:
         height = float(np.clip(height + rng.normal(0, 60), 20, 800))
@@ -171,7 +172,10 @@ def main() -> int:
     planner = get_planner(airframe, settings)
     print(f"bench/live_status.py {' '.join(sys.argv[1:])}  ({platform.node()}, {os.cpu_count()} cores)")
     print(f"load average before: {load_average()}")
-    states = random_walk(airframe, arguments.states, arguments.seed)
+    # Half the walk from cruise, half from the low, slow corner (the hover avoid band), so both verdicts occur.
+    half = arguments.states // 2
+    states = random_walk(airframe, half, arguments.seed)
+    states += random_walk(airframe, arguments.states - half, arguments.seed + 1, start=(120.0, 15.0))
     agreement(airframe, settings, planner, states)
     with SolverPool(airframe, settings, SolverPoolSettings(workers=arguments.workers)) as pool:
         if not pool.wait_ready(120.0, arguments.workers):
