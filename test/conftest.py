@@ -41,6 +41,20 @@ def no_ros_discovery(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("ROS_DOMAIN_ID", str(next_domain_id()))
 
 
+@pytest.fixture
+def context(no_ros_discovery):
+    """A fresh rclpy context with the default node parameters (config/nodes.yaml), discovery off."""
+    import rclpy
+    from rclpy.context import Context
+
+    from helireach_ros.ros.bringup import ros_arguments
+
+    fresh = Context()
+    rclpy.init(context=fresh, args=ros_arguments())
+    yield fresh
+    rclpy.try_shutdown(context=fresh)
+
+
 @pytest.fixture(scope="module")
 def airframe() -> Airframe:
     """The default airframe, as shipped."""

@@ -9,7 +9,6 @@ import math
 import time
 from collections.abc import Callable
 
-import test_ros_nodes
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
@@ -26,7 +25,6 @@ from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 
 HEIGHT, SPEED = 500 * FT, 75 * KT  # well inside the safe region
 
-context = test_ros_nodes.context  # the fixture: one rclpy context per test, discovery off
 
 
 def episode_harness(

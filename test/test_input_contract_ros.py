@@ -8,7 +8,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-import test_ros_nodes
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -35,7 +34,6 @@ BEST_EFFORT = QoSProfile(
 S = 1_000_000_000
 
 
-context = test_ros_nodes.context  # the fixture: one rclpy context per test, discovery off
 
 
 def statuses_named(diagnostics: list[DiagnosticArray], name: str) -> list[DiagnosticStatus]:

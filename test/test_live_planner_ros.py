@@ -13,7 +13,6 @@ import time
 
 import numpy as np
 import pytest
-import test_ros_nodes
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
@@ -26,8 +25,6 @@ from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.monitor import VehicleMonitor
 from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
-
-context = test_ros_nodes.context  # the fixture: one rclpy context per test, discovery off
 
 FPM = FT / 60.0
 LEVEL = (500 * FT, 75 * KT, 0.0)  # height m, speed m/s, climb rate m/s

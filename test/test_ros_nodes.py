@@ -13,7 +13,6 @@ from typing import Any
 
 import numpy as np
 import pytest
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
@@ -29,7 +28,7 @@ from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
-from helireach_ros.ros.bringup import build_system, ros_arguments
+from helireach_ros.ros.bringup import build_system
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS, create_executor
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.ros.nodes.monitor import VehicleMonitor
@@ -38,14 +37,6 @@ from helireach_ros.ros.parameters import ParameterError
 
 TIMEOUT_S = 10.0
 OMEGA0 = 27.0  # uh60a_class nominal rotor speed, rad/s (only used as a plausible measured value)
-
-
-@pytest.fixture
-def context(no_ros_discovery):
-    fresh = Context()
-    rclpy.init(context=fresh, args=ros_arguments())
-    yield fresh
-    rclpy.try_shutdown(context=fresh)
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,6 @@ The live verdicts themselves are tested in ``test_live_planner_ros.py``.
 
 from __future__ import annotations
 
-import test_ros_nodes
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
@@ -20,7 +19,6 @@ from helireach_ros.ros.nodes.monitor import VehicleMonitor
 from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 
 FPM = FT / 60.0
-context = test_ros_nodes.context  # the fixture: one rclpy context per test, discovery off
 
 
 def test_outside_the_envelope_domain_without_a_live_verdict_the_status_is_stale(context: Context) -> None:
