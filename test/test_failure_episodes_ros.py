@@ -13,7 +13,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 from std_msgs.msg import Bool, Header
-from test_ros_nodes import TIMEOUT_S, Harness, level_is, trigger_failure
+from test_ros_nodes import TIMEOUT_S, Harness, level_is, monitor_and_planner, trigger_failure
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState
@@ -24,21 +24,6 @@ from helireach_ros.ros.nodes.monitor import VehicleMonitor
 from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 
 HEIGHT, SPEED = 500 * FT, 75 * KT  # well inside the safe region
-
-
-
-def episode_harness(
-    context: Context, monitor_parameters: dict | None = None, **planner_parameters: object
-) -> tuple[Harness, LandingPlannerNode]:
-    monitor = VehicleMonitor(
-        context=context,
-        parameter_overrides=[Parameter(name, value=value) for name, value in (monitor_parameters or {}).items()],
-    )
-    planner = LandingPlannerNode(
-        context=context,
-        parameter_overrides=[Parameter(name, value=value) for name, value in planner_parameters.items()],
-    )
-    return Harness(context, monitor, planner), planner
 
 
 def monitor_reports(diagnostics: list[DiagnosticArray]) -> list[DiagnosticStatus]:
@@ -92,7 +77,7 @@ def test_no_flag_yet_is_a_monitor_warning_and_the_safety_status_stays_as_the_env
 
 # --- a flapping flag ------------------------------------------------------------------------------------------
 def test_a_flag_flapping_at_100_hz_is_one_episode_with_a_trajectory_while_it_flaps(context: Context) -> None:
-    harness, planner = episode_harness(context, replan_period=0.0)
+    harness, planner = monitor_and_planner(context, replan_period=0.0)
     events = harness.listen(Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS)
     trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
@@ -129,7 +114,7 @@ def test_a_flag_flapping_at_100_hz_is_one_episode_with_a_trajectory_while_it_fla
 # --- engine recovered -----------------------------------------------------------------------------------------
 def test_a_flag_false_for_good_ends_the_episode_after_the_hold_and_replanning_stops(context: Context) -> None:
     hold_s = 0.6
-    harness, planner = episode_harness(context, {"recovery_hold": hold_s}, replan_period=0.1)
+    harness, planner = monitor_and_planner(context, {"recovery_hold": hold_s}, replan_period=0.1)
     trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     episodes = harness.listen(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.STREAM_QOS)
@@ -173,7 +158,7 @@ def test_a_flag_false_for_good_ends_the_episode_after_the_hold_and_replanning_st
 # --- a failure while the state is invalid ---------------------------------------------------------------------
 def test_a_failure_planned_from_a_later_state_is_flagged_late_and_never_plain_safe(context: Context) -> None:
     max_age_s = 0.5
-    harness, _ = episode_harness(context, max_message_age=max_age_s, replan_period=0.1)
+    harness, _ = monitor_and_planner(context, max_message_age=max_age_s, replan_period=0.1)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     events = harness.listen(Header, rm.TOPIC_FAILURE_EVENT, rm.EVENT_QOS)
     try:

@@ -15,33 +15,19 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.context import Context
-from rclpy.parameter import Parameter
 from std_msgs.msg import Bool
-from test_ros_nodes import Harness
+from test_ros_nodes import Harness, monitor_and_planner
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.planner import plan_landing
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
-from helireach_ros.ros.nodes.monitor import VehicleMonitor
-from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 
 FPM = FT / 60.0
 LEVEL = (500 * FT, 75 * KT, 0.0)  # height m, speed m/s, climb rate m/s
 DESCENDING = (304 * FT, 77 * KT, -3000 * FPM)  # the 3,000 ft/min descent (safe)
 DESCENDING_SLOW = (150 * FT, 20 * KT, -2000 * FPM)  # 2,000 ft/min at 20 kt: unsafe
-
-
-def live_harness(context: Context, monitor_parameters: dict | None = None, **planner_parameters: object):
-    monitor = VehicleMonitor(
-        context=context,
-        parameter_overrides=[Parameter(name, value=value) for name, value in (monitor_parameters or {}).items()],
-    )
-    planner = LandingPlannerNode(
-        context=context,
-        parameter_overrides=[Parameter(name, value=value) for name, value in planner_parameters.items()],
-    )
-    return Harness(context, monitor, planner), planner
+CONVERGED = ("safe", "unsafe", "unverified")  # plan statuses of a converged solve
 
 
 def stream_until(harness: Harness, state: tuple[float, float, float], until, timeout_s: float = 15.0) -> bool:
@@ -68,7 +54,7 @@ def evaluated_state(fields: dict[str, str]) -> np.ndarray:
 )
 def test_live_verdicts_come_at_the_rate_and_agree_with_plan_landing(context: Context, state, airframe, settings):
     rate_hz = 5.0
-    harness, _ = live_harness(context, replan_period=0.0, live_rate=rate_hz)
+    harness, _ = monitor_and_planner(context, replan_period=0.0, live_rate=rate_hz)
     live = harness.listen(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
     try:
         assert stream_until(harness, state, lambda: len(live) >= 1), "no live verdict"
@@ -102,7 +88,7 @@ def test_live_verdicts_come_at_the_rate_and_agree_with_plan_landing(context: Con
 
 def test_on_a_failure_the_first_trajectory_is_the_verified_standby_then_the_refined_plan(context: Context):
     # standby_max_age generous: this test is about which plan goes out, not about how fresh the verdict is
-    harness, planner = live_harness(context, {"recovery_hold": 0.3}, replan_period=0.0, standby_max_age=5.0)
+    harness, planner = monitor_and_planner(context, {"recovery_hold": 0.3}, replan_period=0.0, standby_max_age=5.0)
     live = harness.listen(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
     trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
@@ -139,7 +125,7 @@ def test_killing_the_worker_mid_solve_gives_a_fallback_within_the_deadline_and_a
     context: Context,
 ):
     deadline_s = 2.0  # long: the fallback must come from the worker's death, not from the deadline timer
-    harness, planner = live_harness(
+    harness, planner = monitor_and_planner(
         context, solver_workers=1, live_rate=0.0, deadline=deadline_s, replan_period=0.2, diagnostics_period=0.1
     )
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
@@ -161,12 +147,15 @@ def test_killing_the_worker_mid_solve_gives_a_fallback_within_the_deadline_and_a
         assert fallback["status"] == "fallback" and "died" in fallback["reason"], fallback
         assert float(fallback["latency_ms"]) < deadline_s * 1e3
         # the worker restarts and the closed loop gets its converged plan
-        assert stream_until(harness, LEVEL, lambda: any(values(m)["fallback"] == "false" for m in plan_statuses))
+        # (a converged plan: a "NO PLAN" status is not a fallback either, but it is no plan)
+        assert stream_until(harness, LEVEL, lambda: any(values(m)["status"] in CONVERGED for m in plan_statuses))
         assert pool.restarts == 1 and killed not in pool.worker_pids()
 
         def reported() -> bool:
             reports = [s for array in diagnostics for s in array.status if s.name == "helireach_planner: planner"]
-            return bool(reports) and values(reports[-1]).get("worker_restarts") == "1"
+            # the restart and the replacement worker ready (a report sent during the restart is ERROR: no worker)
+            latest = values(reports[-1]) if reports else {}
+            return latest.get("worker_restarts") == "1" and latest.get("ready_workers") == "1"
 
         assert harness.spin_until(reported, 5.0)
         report = next(s for array in reversed(diagnostics) for s in array.status if s.name.endswith("planner"))
@@ -176,7 +165,9 @@ def test_killing_the_worker_mid_solve_gives_a_fallback_within_the_deadline_and_a
 
 
 def test_a_hung_worker_gets_the_deadline_fallback_then_is_restarted_after_solve_timeout(context: Context):
-    harness, planner = live_harness(context, solver_workers=1, live_rate=0.0, replan_period=0.2, solve_timeout=1.0)
+    harness, planner = monitor_and_planner(
+        context, solver_workers=1, live_rate=0.0, replan_period=0.2, solve_timeout=1.0
+    )
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     pool = planner.planner
     (hung,) = pool.worker_pids()
@@ -189,7 +180,8 @@ def test_a_hung_worker_gets_the_deadline_fallback_then_is_restarted_after_solve_
         assert fallback["status"] == "fallback" and "deadline" in fallback["reason"], fallback
         assert stream_until(harness, LEVEL, lambda: pool.restarts == 1 and hung not in pool.worker_pids(), 5.0)
         assert "no answer within 1 s" in pool.last_error
-        assert stream_until(harness, LEVEL, lambda: any(values(m)["fallback"] == "false" for m in plan_statuses))
+        # (a converged plan: a "NO PLAN" status is not a fallback either, but it is no plan)
+        assert stream_until(harness, LEVEL, lambda: any(values(m)["status"] in CONVERGED for m in plan_statuses))
     finally:
         with contextlib.suppress(ProcessLookupError):
             os.kill(hung, signal.SIGKILL)
@@ -197,7 +189,7 @@ def test_a_hung_worker_gets_the_deadline_fallback_then_is_restarted_after_solve_
 
 
 def test_a_live_plan_older_than_standby_max_age_is_not_published_as_the_standby(context: Context):
-    harness, planner = live_harness(context, replan_period=0.0, standby_max_age=0.001)  # older than any solve
+    harness, planner = monitor_and_planner(context, replan_period=0.0, standby_max_age=0.001)  # older than any solve
     live = harness.listen(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     try:
@@ -214,7 +206,7 @@ def test_a_live_plan_older_than_standby_max_age_is_not_published_as_the_standby(
 
 
 def test_without_a_pool_live_verdicts_and_the_standby_come_from_the_solver_thread(context: Context):
-    harness, planner = live_harness(context, solver_workers=0, replan_period=0.0, standby_max_age=5.0)
+    harness, planner = monitor_and_planner(context, solver_workers=0, replan_period=0.0, standby_max_age=5.0)
     live = harness.listen(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     try:

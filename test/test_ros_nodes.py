@@ -102,6 +102,21 @@ class Harness:
             node.destroy_node()
 
 
+def monitor_and_planner(
+    context: Context, monitor_parameters: dict | None = None, **planner_parameters: object
+) -> tuple[Harness, LandingPlannerNode]:
+    """A harness with a monitor and a planner, each with the given parameter overrides; and the planner."""
+    monitor = VehicleMonitor(
+        context=context,
+        parameter_overrides=[Parameter(name, value=value) for name, value in (monitor_parameters or {}).items()],
+    )
+    planner = LandingPlannerNode(
+        context=context,
+        parameter_overrides=[Parameter(name, value=value) for name, value in planner_parameters.items()],
+    )
+    return Harness(context, monitor, planner), planner
+
+
 def latest_level(messages: list[DiagnosticStatus]) -> bytes | None:
     return messages[-1].level if messages else None
 
