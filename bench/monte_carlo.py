@@ -1,0 +1,275 @@
+"""Closed loop under uncertainty: how often the re-planning landing stays within limits (issue 12).
+
+Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
+     [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
+
+Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
+node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
+latency are drawn uniformly from the uncertainty set (:mod:`helireach_ros.core.uncertainty`), with the
+set's sensor noise, after a total power loss from level trim. The planner keeps the nominal model. Run
+``seed`` flies initial state ``seed mod len(states)``; its draw and its noise come from ``seed`` alone, so
+``--seeds S`` repeats a run exactly.
+
+Initial states: 500 ft / 75 kt; for each of 100, 200, 300, 400 and 550 ft the slowest speed (1 kt steps)
+at least 30 ft/kt inside the boundary of the shipped envelope (``Envelope.margin``; kept only within
+20-40 ft/kt); three states deep inside (700 ft / 40 kt, 350 ft / 110 kt, 600 ft / 90 kt).
+
+Margins (``--margins T/R``): the planner plans inside tightened limits (touchdown descent and forward
+speed × (1 − T), rotor-speed limits R × Ω₀ further inside) while every landing is judged against the true
+ones. This needs no change to the NLP: its limits are the airframe's, so the planner is simply built for
+an airframe with tightened limits.
+
+Prints, per margin setting: the success rate with its 95 % Wilson interval overall and per initial state,
+the touchdown descent-rate and forward-speed distributions, the rotor-speed range, the success rate in the
+lower and upper half of each range (what the failures lean on), each failure's seed;
+then (unless ``--no-weight-check``) the issue's acceptance case, an unknown +5 % weight from 500 ft / 75 kt,
+for a few latencies and noise seeds. Parallel over ``--workers`` local processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import math
+import multiprocessing
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from functools import lru_cache
+
+import numpy as np
+from baseline_config import load_average
+
+from helireach_ros.core.airframe import Airframe, load_airframe
+from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
+from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.robust_verification import model_vehicle
+from helireach_ros.core.settings import PlannerSettings, load_settings
+from helireach_ros.core.simulation import Scenario, SensorNoise, load_scenario
+from helireach_ros.core.uncertainty import (
+    DEFAULT_UNCERTAINTY_FILE,
+    PerturbedModel,
+    UncertaintySet,
+    load_uncertainty_set,
+)
+from helireach_ros.core.units import FT, KT
+
+NEAR_BOUNDARY_HEIGHTS_FT = (100.0, 200.0, 300.0, 400.0, 550.0)
+NEAR_BOUNDARY_MARGIN = (20.0, 30.0, 40.0)  # accepted low, target, accepted high, ft/kt
+DEEP_STATES = ((700.0, 40.0), (350.0, 110.0), (600.0, 90.0))  # ft, kt
+WEIGHT_CHECK_LATENCIES = (0.05, 0.1, 0.3)
+WEIGHT_CHECK_SEEDS = (7, 8, 9)
+
+
+def wilson_interval(successes: int, runs: int, z: float = 1.959964) -> tuple[float, float]:
+    """The Wilson score interval for a binomial proportion (95 % for the default z).
+
+    .. math:: \\frac{p + z^2/2n \\pm z\\sqrt{p(1-p)/n + z^2/4n^2}}{1 + z^2/n}
+    """
+    if runs == 0:
+        return 0.0, 1.0
+    p = successes / runs
+    centre = p + z * z / (2 * runs)
+    spread = z * math.sqrt(p * (1 - p) / runs + z * z / (4 * runs * runs))
+    scale = 1 + z * z / runs
+    return max(0.0, (centre - spread) / scale), min(1.0, (centre + spread) / scale)
+
+
+def initial_states() -> list[tuple[float, float, float]]:
+    """(height ft, speed kt, envelope margin ft/kt) of the runs' initial states (see the module docstring)."""
+    envelope = load_envelope(default_envelope_path())
+    low, target, high = NEAR_BOUNDARY_MARGIN
+    states = [(500.0, 75.0)]
+    for height in NEAR_BOUNDARY_HEIGHTS_FT:
+        speed = next(
+            (float(v) for v in range(0, 121) if envelope.margin(height * FT, v * KT) >= target),
+            math.nan,
+        )
+        if math.isfinite(speed) and low <= envelope.margin(height * FT, speed * KT) <= high:
+            states.append((height, speed))
+    states.extend(DEEP_STATES)
+    return [(height, speed, envelope.margin(height * FT, speed * KT)) for height, speed in states]
+
+
+@dataclasses.dataclass(frozen=True)
+class Margin:
+    """Planning margins: touchdown rates × (1 − touchdown), rotor limits ``rotor`` × Ω₀ further inside."""
+
+    touchdown: float
+    rotor: float
+
+    @classmethod
+    def parse(cls, text: str) -> Margin:
+        touchdown, _, rotor = text.partition("/")
+        margin = cls(float(touchdown), float(rotor or 0.0))
+        if not (0.0 <= margin.touchdown < 1.0 and 0.0 <= margin.rotor < 0.1):
+            raise argparse.ArgumentTypeError(f"margin {text!r}: need T/R with 0 <= T < 1, 0 <= R < 0.1")
+        return margin
+
+    def label(self) -> str:
+        return f"touchdown -{100 * self.touchdown:.0f} %, rotor {100 * self.rotor:.0f} % inside"
+
+    def planning_airframe(self, airframe: Airframe) -> Airframe:
+        """The airframe the planner is built for: the true one with tightened limits."""
+        if self.touchdown == 0.0 and self.rotor == 0.0:
+            return airframe
+        limits = airframe.limits
+        tightened = dataclasses.replace(
+            limits,
+            max_descent_rate=limits.max_descent_rate * (1.0 - self.touchdown),
+            max_forward_speed=limits.max_forward_speed * (1.0 - self.touchdown),
+            min_rotor_speed_ratio=limits.min_rotor_speed_ratio + self.rotor,
+            max_rotor_speed_ratio=limits.max_rotor_speed_ratio - self.rotor,
+        )
+        return dataclasses.replace(airframe, name=f"{airframe.name}+margins", limits=tightened)
+
+
+@lru_cache(maxsize=1)
+def _context(uncertainty_file: str) -> tuple[Airframe, PlannerSettings, UncertaintySet]:
+    return load_airframe("uh60a_class"), load_settings(None), load_uncertainty_set(uncertainty_file)
+
+
+def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int]) -> dict:
+    """One closed-loop landing (a worker process's job)."""
+    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed = task
+    airframe, settings, _ = _context(uncertainty_file)
+    planner = get_planner(margin.planning_airframe(airframe), settings)
+    scenario = Scenario(
+        name="monte_carlo", height=height_ft * FT, forward_speed=speed_kt * KT, noise=noise, seed=noise_seed
+    )
+    vehicle = model_vehicle(scenario, model, airframe, settings)  # judged against the true limits
+    started = time.perf_counter()
+    result = fly_closed_loop(vehicle, planner, ClosedLoopSettings(latency=model.latency))
+    report = result.touchdown
+    omega0 = airframe.nominal_rotor_speed
+    return {
+        "within": report.within_limits,
+        "descent_ft_s": report.descent_rate / FT,
+        "speed_kt": abs(report.forward_speed) / KT,
+        "rotor_min_pct": 100 * report.min_rotor_speed / omega0,
+        "rotor_max_pct": 100 * report.max_rotor_speed / omega0,
+        "reason": report.reason,
+        "plans": result.plans,
+        "failed_plans": result.failed_plans,
+        "unsafe_plans": result.unsafe_plans,
+        "wall_s": time.perf_counter() - started,
+    }
+
+
+def run_tasks(tasks: list, workers: int) -> list[dict]:
+    if workers <= 1:
+        return [fly(task) for task in tasks]
+    with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        return list(pool.map(fly, tasks, chunksize=1))
+
+
+def _percentiles(values: list[float]) -> str:
+    q = np.percentile(values, [0, 5, 50, 95, 100])
+    return "min {:.1f}  5% {:.1f}  median {:.1f}  95% {:.1f}  max {:.1f}".format(*q)
+
+
+def _rate(within: int, runs: int) -> str:
+    low, high = wilson_interval(within, runs)
+    return f"{within:4d}/{runs:<4d} {100 * within / max(runs, 1):5.1f} %  [{100 * low:5.1f}, {100 * high:5.1f}] %"
+
+
+def report(
+    margin: Margin, states: list, seeds: list[int], draws: dict, results: list[dict], limits, uncertainty
+) -> None:
+    print(f"\n== margins: {margin.label()} ==")
+    print(f"{'initial state':>16} {'margin':>7}  {'within/runs':>9} {'rate':>7}  95 % Wilson CI")
+    for index, (height, speed, envelope_margin) in enumerate(states):
+        mine = [r for seed, r in zip(seeds, results, strict=True) if seed % len(states) == index]
+        print(
+            f"{height:6.0f} ft {speed:4.0f} kt {envelope_margin:7.0f}  "
+            f"{_rate(sum(r['within'] for r in mine), len(mine))}"
+        )
+    print(f"{'all':>16} {'':>7}  {_rate(sum(r['within'] for r in results), len(results))}")
+    print(f"touchdown descent rate ft/s (limit {limits.max_descent_rate / FT:.0f}): "
+          f"{_percentiles([r['descent_ft_s'] for r in results])}")  # fmt: skip
+    print(f"touchdown |forward speed| kt (limit {limits.max_forward_speed / KT:.0f}): "
+          f"{_percentiles([r['speed_kt'] for r in results])}")  # fmt: skip
+    print(f"rotor minimum in flight % (limit {100 * limits.min_rotor_speed_ratio:.0f}): "
+          f"{_percentiles([r['rotor_min_pct'] for r in results])}")  # fmt: skip
+    print(f"rotor maximum in flight % (limit {100 * limits.max_rotor_speed_ratio:.0f}): "
+          f"{_percentiles([r['rotor_max_pct'] for r in results])}")  # fmt: skip
+    plans = sum(r["plans"] for r in results)
+    print(
+        f"plans {plans}, called not safe {sum(r['unsafe_plans'] for r in results)}, "
+        f"solver failures {sum(r['failed_plans'] for r in results)}; "
+        f"closed-loop wall per run median {np.median([r['wall_s'] for r in results]):.1f} s"
+    )
+    print("success by half of each range (lower half | upper half): what the failures lean on")
+    for name in uncertainty.uncertain_quantities:
+        interval = uncertainty.ranges()[name]
+        halves: tuple[list[bool], list[bool]] = ([], [])
+        for seed, r in zip(seeds, results, strict=True):
+            halves[draws[seed].values()[name] > 0.5 * (interval.low + interval.high)].append(r["within"])
+        print(f"  {name:24} " + " | ".join(_rate(sum(half), len(half)) for half in halves))
+    failures = [(seed, r) for seed, r in zip(seeds, results, strict=True) if not r["within"]]
+    print(f"failures ({len(failures)}): seed, initial state, latency, reason")
+    for seed, r in failures:
+        height, speed, _ = states[seed % len(states)]
+        print(f"  seed {seed:4d}  {height:4.0f} ft {speed:4.0f} kt  latency {draws[seed].latency:.2f} s  {r['reason']}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--runs", type=int, default=200, help="runs per margin setting (seeds first-seed ...)")
+    parser.add_argument("--first-seed", type=int, default=0)
+    parser.add_argument("--seeds", type=int, nargs="+", help="exactly these runs (overrides --runs)")
+    parser.add_argument("--workers", type=int, default=2, help="local processes (the machine is shared: modest)")
+    parser.add_argument("--margins", type=Margin.parse, nargs="+", default=[Margin(0.0, 0.0)], help="T/R ...")
+    parser.add_argument("--uncertainty", default=DEFAULT_UNCERTAINTY_FILE)
+    parser.add_argument("--no-weight-check", action="store_true", help="skip the +5 %% weight acceptance case")
+    arguments = parser.parse_args()
+    airframe, _, uncertainty = _context(arguments.uncertainty)
+    states = initial_states()
+    seeds = arguments.seeds or list(range(arguments.first_seed, arguments.first_seed + arguments.runs))
+    print(f"command: {' '.join(sys.argv)}; load average {load_average()}")
+    print(
+        f"uncertainty set {uncertainty.name!r} ({', '.join(uncertainty.uncertain_quantities)}), uniform draws; "
+        f"{len(seeds)} runs per margin setting over {len(states)} initial states, {arguments.workers} workers"
+    )
+    draws, noise_seeds = {}, {}
+    for seed in seeds:
+        draw_sequence, noise_sequence = np.random.SeedSequence(seed).spawn(2)
+        draws[seed] = uncertainty.draw(np.random.default_rng(draw_sequence))[0]
+        noise_seeds[seed] = int(noise_sequence.generate_state(1)[0])
+    for margin in arguments.margins:
+        started = time.perf_counter()
+        tasks = [
+            (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed], uncertainty.sensor_noise,
+             noise_seeds[seed])
+            for seed in seeds
+        ]  # fmt: skip
+        results = run_tasks(tasks, arguments.workers)
+        report(margin, states, seeds, draws, results, airframe.limits, uncertainty)
+        print(f"wall {time.perf_counter() - started:.0f} s; load average {load_average()}")
+    if not arguments.no_weight_check:
+        weight_check(arguments)
+    print(f"load average at the end {load_average()}")
+
+
+def weight_check(arguments: argparse.Namespace) -> None:
+    """The issue's acceptance case: +5 % weight the planner does not know, the demo's noise, 500 ft / 75 kt."""
+    demo = load_scenario("demo_500ft_75kt")
+    print("\n== unknown +5 % gross weight, 500 ft / 75 kt, the demo's sensor noise, no other error ==")
+    tasks, keys = [], []
+    for margin in arguments.margins:
+        for latency in WEIGHT_CHECK_LATENCIES:
+            for seed in WEIGHT_CHECK_SEEDS:
+                model = PerturbedModel({"gross_weight": 0.05}, latency=latency, label="gross_weight+5%")
+                tasks.append((arguments.uncertainty, margin, 500.0, 75.0, model, demo.noise, seed))
+                keys.append((margin, latency, seed))
+    for (margin, latency, seed), r in zip(keys, run_tasks(tasks, arguments.workers), strict=True):
+        verdict = "within limits" if r["within"] else f"OUTSIDE: {r['reason']}"
+        print(
+            f"  {margin.label():34} latency {latency:.2f} s seed {seed}: {r['descent_ft_s']:4.1f} ft/s "
+            f"{r['speed_kt']:4.1f} kt rotor {r['rotor_min_pct']:.1f}-{r['rotor_max_pct']:.1f} %  {verdict}"
+        )
+
+
+if __name__ == "__main__":
+    main()

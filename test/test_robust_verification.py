@@ -1,0 +1,94 @@
+"""Robust verification of today's 500 ft / 75 kt plan: real IPOPT, real CVODES, open and closed loop.
+
+Noise-free scenarios, so every verdict is deterministic. What is asserted was measured first: today's planner
+is not robust over the default set's resolution-IV corners (11 of 16 fail closed loop, 16 of 16 open loop).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from helireach_ros.core.planner import get_planner
+from helireach_ros.core.robust_verification import failure_state, model_vehicle, verify_robust
+from helireach_ros.core.simulation import Scenario
+from helireach_ros.core.uncertainty import PerturbedModel, UncertainRange, load_uncertainty_set
+from helireach_ros.core.units import FT, KT
+
+_WORST_CORNER = (
+    "gross_weight+5%,horizontal_drag_area+20%,vertical_drag_area+20%,blade_drag_coefficient+10%,"
+    "rotor_inertia+10%,rotor_power_efficiency+5%,density_altitude+500ft,latency0.30s"
+)
+
+
+@pytest.fixture(scope="module")
+def scenario() -> Scenario:
+    return Scenario(name="robust_500ft_75kt", height=500 * FT, forward_speed=75 * KT)
+
+
+@pytest.fixture(scope="module")
+def planner(airframe, settings):
+    return get_planner(airframe, settings)
+
+
+@pytest.fixture(scope="module")
+def uncertainty():
+    return load_uncertainty_set()
+
+
+def test_todays_plan_is_not_robust_over_the_default_corners_because_named_corners_fail(
+    scenario, planner, uncertainty
+) -> None:
+    design = uncertainty.verification_design()
+    verdict = verify_robust(scenario, planner, design, design="resolution-IV corners of the default set")
+    assert verdict.nominal_status == "safe"  # the nominal model lands: the failures are the perturbations'
+    assert not verdict.robust
+    assert len(verdict.closed_loop) == len(verdict.open_loop) == 16
+    assert _WORST_CORNER in verdict.failing_models  # heavy, draggy, thin air, late plans
+    worst = next(outcome for outcome in verdict.closed_loop if outcome.model.label == _WORST_CORNER)
+    assert worst.touchdown.descent_rate > planner.airframe.limits.max_descent_rate
+    failing = len(verdict.failing_models)
+    assert verdict.reason.startswith(f"{failing} of 16 models fail closed loop; first {_WORST_CORNER}: touchdown at")
+    assert 0 < failing < 16  # feedback saves some corners ...
+    assert not any(outcome.within_limits for outcome in verdict.open_loop)  # ... open loop none
+
+
+def test_a_set_without_uncertainty_is_robust(scenario, planner, uncertainty) -> None:
+    exact = UncertainRange(0.0, 0.0, "exact")
+    no_uncertainty = dataclasses.replace(
+        uncertainty,
+        parameters=tuple((name, exact) for name, _ in uncertainty.parameters),
+        density_altitude=exact,
+        plan_latency=exact,
+    )
+    design = no_uncertainty.verification_design()
+    verdict = verify_robust(scenario, planner, design)
+    assert len(design) == 1 and design[0].mismatch == dict.fromkeys(design[0].mismatch, 0.0)
+    assert verdict.robust, verdict.reason
+    assert verdict.open_loop[0].within_limits and verdict.closed_loop[0].within_limits
+
+
+def test_one_failing_model_makes_the_verdict_not_robust(scenario, planner) -> None:
+    """Constructed: the exact model lands, a 25 % weight error does not; the verdict is not robust."""
+    heavy = PerturbedModel({"gross_weight": 0.25}, latency=0.05, label="gross_weight+25%")
+    verdict = verify_robust(scenario, planner, [PerturbedModel({}, latency=0.05), heavy])
+    assert verdict.closed_loop[0].within_limits
+    assert not verdict.closed_loop[1].within_limits
+    assert not verdict.robust and verdict.failing_models == ("gross_weight+25%",)
+    assert "gross_weight+25%" in verdict.reason
+
+
+def test_no_models_is_never_robust(scenario, planner) -> None:
+    verdict = verify_robust(scenario, planner, [])
+    assert not verdict.robust and verdict.reason == "no perturbed model was flown"
+
+
+def test_a_plan_from_another_state_or_a_scenario_with_its_own_mismatch_is_refused(scenario, planner) -> None:
+    lower = dataclasses.replace(scenario, height=400 * FT)
+    other_plan = planner.plan(failure_state(lower, planner.airframe))
+    with pytest.raises(ValueError, match="failure state"):
+        verify_robust(scenario, planner, [PerturbedModel({})], plan=other_plan)
+    mismatched = dataclasses.replace(scenario, parameter_mismatch={"gross_weight": 0.05})
+    with pytest.raises(ValueError, match="own parameter mismatch"):
+        model_vehicle(mismatched, PerturbedModel({}), planner.airframe, planner.settings)
