@@ -173,7 +173,7 @@ def _acados_worker(exchange: Path) -> None:
 
 
 def _compare(arguments: argparse.Namespace) -> None:
-    from baseline_config import load_average
+    from baseline_config import loadavg_text
 
     from helireach_ros.core.airframe import load_airframe
     from helireach_ros.core.model import initial_state_after_failure
@@ -183,7 +183,7 @@ def _compare(arguments: argparse.Namespace) -> None:
     from helireach_ros.core.units import FT, KT
     from helireach_ros.core.verification import replay_plan
 
-    print(f"command: {' '.join(sys.argv)}; load average {load_average()}")
+    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
     airframe, settings = load_airframe(arguments.airframe), load_settings()
     planner = get_planner(airframe, settings)
     transcription = planner.transcription
@@ -305,7 +305,7 @@ def _compare(arguments: argparse.Namespace) -> None:
         print(f"    {key}: {count}")
     adopt = same == len(rows) and np.median(acados_ms) * 2.0 <= np.median(ipopt_ms)
     print(f"  adoption rule (equal verdicts on every state and >= 2x speed): {'met' if adopt else 'not met'}")
-    print(f"load average {load_average()}")
+    print(f"load average {loadavg_text()}")
 
 
 def main() -> None:

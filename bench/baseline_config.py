@@ -10,7 +10,7 @@ import os
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.settings import PlannerSettings
 
-__all__ = ["BEFORE_ISSUE_13", "baseline_codegen", "baseline_settings", "load_average"]
+__all__ = ["BEFORE_ISSUE_13", "baseline_codegen", "baseline_settings", "loadavg_text"]
 
 BEFORE_ISSUE_13 = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2}
 """The warm-solver options before issue 13 (``bound_push``/``bound_frac`` were IPOPT's defaults)."""
@@ -26,6 +26,6 @@ def baseline_codegen() -> CodegenSettings:
     return CodegenSettings(mode="off")
 
 
-def load_average() -> str:
+def loadavg_text() -> str:
     """``os.getloadavg()`` as printed by the benches (1, 5 and 15 minutes)."""
     return " ".join(f"{load:.2f}" for load in os.getloadavg())

@@ -18,6 +18,8 @@ import argparse
 import dataclasses
 import time
 
+from baseline_config import loadavg_text
+
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.planner import get_planner
@@ -44,6 +46,7 @@ def main() -> None:
         f"limits {limits.max_descent_rate / FT:.0f} ft/s, {limits.max_forward_speed / KT:.0f} kt, rotor "
         f"{100 * limits.min_rotor_speed_ratio:.0f}-{100 * limits.max_rotor_speed_ratio:.0f} % in flight"
     )
+    print(f"load average before (1/5/15 min): {loadavg_text()}")
     print(f"{'latency s':>9} {'seed':>4} {'ft/s':>5} {'kt':>5} {'rotor % in flight':>18} {'plans':>5}  verdict")
     for latency in arguments.latencies:
         policy = ClosedLoopSettings(replan_period=arguments.replan_period, latency=latency)
@@ -61,6 +64,7 @@ def main() -> None:
                 f"{result.plans:5d}  {verdict} ({time.perf_counter() - started:.1f} s)"
             )
         print(f"{'':9} {'':4} latency {latency:g} s: {within} of {len(arguments.seeds)} within limits")
+    print(f"load average after (1/5/15 min): {loadavg_text()}")
 
 
 if __name__ == "__main__":

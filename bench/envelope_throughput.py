@@ -26,7 +26,7 @@ import sys
 import time
 
 import numpy as np
-from baseline_config import baseline_codegen, baseline_settings, load_average
+from baseline_config import baseline_codegen, baseline_settings, loadavg_text
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.compute import EnvelopeJob, _solve_point, _warm_start_of, compute_envelope
@@ -135,7 +135,7 @@ def main() -> None:
         f"intervals; {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, Python "
         f"{platform.python_version()}"
     )
-    print(f"command: {' '.join(sys.argv)}; load average {load_average()}")
+    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
     for workers in (int(item) for item in arguments.workers.split(",")):
         if not arguments.baseline:
             _run(job, workers)
@@ -156,7 +156,7 @@ def main() -> None:
             f"\n{workers} worker(s): current / baseline wall time {overall:.3f}x "
             f"(per pair {', '.join(f'{r:.3f}' for r in ratios)}), worker CPU time {cpu_ratio:.3f}x; "
             f"identical classification {same} of "
-            f"{statuses['current'].size} nodes; load average {load_average()}"
+            f"{statuses['current'].size} nodes; load average {loadavg_text()}"
         )
     _time_split(job, [0, len(job.speeds) // 2, len(job.speeds) - 1])
 

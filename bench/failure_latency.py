@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 import rclpy
-from baseline_config import load_average
+from baseline_config import loadavg_text
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -234,7 +234,7 @@ def _percentiles(label: str, samples: list[float]) -> str:
 
 def _report(name: str, results: dict[str, list]) -> None:
     first, kinds, refined = results["first"], results["kind"], results["refined"]
-    print(f"\n{name}: {len(first)} failures, load average {load_average()}")
+    print(f"\n{name}: {len(first)} failures, load average {loadavg_text()}")
     print(_percentiles("failure -> first trajectory (any)", first))
     print(_percentiles("  of which the standby plan", [t for t, k in zip(first, kinds, strict=True) if k == "standby"]))
     print(_percentiles("  of which the refined plan", [t for t, k in zip(first, kinds, strict=True) if k == "refined"]))
@@ -269,7 +269,7 @@ def main() -> None:
     print(
         f"helireach failure latency: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
         f"Python {platform.python_version()}, {arguments.failures} failures, seed {arguments.seed}, "
-        f"load average {load_average()}"
+        f"load average {loadavg_text()}"
     )
     print(f"command: {' '.join([Path(sys.executable).name, *sys.argv])}")
     configurations = [("solver workers + live evaluation (defaults)", [])]

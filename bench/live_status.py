@@ -25,7 +25,7 @@ import threading
 import time
 
 import numpy as np
-from baseline_config import load_average
+from baseline_config import loadavg_text
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, failure_now_state
@@ -171,7 +171,7 @@ def main() -> int:
     airframe, settings = load_airframe("uh60a_class"), load_settings()
     planner = get_planner(airframe, settings)
     print(f"bench/live_status.py {' '.join(sys.argv[1:])}  ({platform.node()}, {os.cpu_count()} cores)")
-    print(f"load average before: {load_average()}")
+    print(f"load average before: {loadavg_text()}")
     # Half the walk from cruise, half from the low, slow corner (the hover avoid band), so both verdicts occur.
     half = arguments.states // 2
     states = random_walk(airframe, half, arguments.seed)
@@ -183,7 +183,7 @@ def main() -> int:
             return 1
         gil_effect(planner, pool, states[:30])
         live_rate(airframe, pool, arguments.seconds)
-    print(f"load average after: {load_average()}")
+    print(f"load average after: {loadavg_text()}")
     print(f"reproduce: .venv/bin/python bench/live_status.py {' '.join(sys.argv[1:])}")
     return 0
 

@@ -38,7 +38,7 @@ from concurrent.futures import ProcessPoolExecutor
 from functools import lru_cache
 
 import numpy as np
-from baseline_config import load_average
+from baseline_config import loadavg_text
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
@@ -227,7 +227,7 @@ def main() -> None:
     airframe, _, uncertainty = _context(arguments.uncertainty)
     states = initial_states()
     seeds = arguments.seeds or list(range(arguments.first_seed, arguments.first_seed + arguments.runs))
-    print(f"command: {' '.join(sys.argv)}; load average {load_average()}")
+    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
     print(
         f"uncertainty set {uncertainty.name!r} ({', '.join(uncertainty.uncertain_quantities)}), uniform draws; "
         f"{len(seeds)} runs per margin setting over {len(states)} initial states, {arguments.workers} workers"
@@ -246,10 +246,10 @@ def main() -> None:
         ]  # fmt: skip
         results = run_tasks(tasks, arguments.workers)
         report(margin, states, seeds, draws, results, airframe.limits, uncertainty)
-        print(f"wall {time.perf_counter() - started:.0f} s; load average {load_average()}")
+        print(f"wall {time.perf_counter() - started:.0f} s; load average {loadavg_text()}")
     if not arguments.no_weight_check:
         weight_check(arguments)
-    print(f"load average at the end {load_average()}")
+    print(f"load average at the end {loadavg_text()}")
 
 
 def weight_check(arguments: argparse.Namespace) -> None:

@@ -25,7 +25,7 @@ import sys
 import time
 
 import numpy as np
-from baseline_config import baseline_codegen, baseline_settings, load_average
+from baseline_config import baseline_codegen, baseline_settings, loadavg_text
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.compiled_nlp import CodegenSettings
@@ -125,11 +125,11 @@ def main() -> None:
     points = _serpentine_grid(arguments.states)
     print(f"command: {' '.join(sys.argv)}")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; {len(points)} states")
-    print(f"load average before: {load_average()}")
+    print(f"load average before: {loadavg_text()}")
     methods = ("verified", "paper") if arguments.method == "both" else (arguments.method,)
     for method in methods:
         _run_method(airframe, method, points, arguments.baseline)
-    print(f"\nload average after: {load_average()}")
+    print(f"\nload average after: {loadavg_text()}")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ import argparse
 import time
 
 import numpy as np
+from baseline_config import loadavg_text
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.model import initial_state_after_failure
@@ -53,6 +54,7 @@ def main() -> None:
         f"{'variant':32s} {'NLP-safe':>8s} {'replay fails':>13s} {'fail %':>7s} {'safe':>5s} {'failed':>6s} "
         f"{'safe but ref unsafe':>19s} {'median ms':>9s} {'p95 ms':>7s} {'total s':>7s}"
     )
+    print(f"load average before (1/5/15 min): {loadavg_text()}")
     print(header)
     for name, (plans, total_s) in results.items():
         nlp_safe = np.array([plan.value <= 0.0 and plan.solver.success for plan in plans])
@@ -69,6 +71,7 @@ def main() -> None:
         )
     print("\n'safe but ref unsafe' counts cells a variant would call safe (paper: by its NLP value, as the paper does;")
     print("verified: after its replay check) that the reference calls unsafe or unverified.")
+    print(f"load average after (1/5/15 min): {loadavg_text()}")
 
 
 if __name__ == "__main__":

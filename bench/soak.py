@@ -20,7 +20,7 @@ import tempfile
 import time
 
 import numpy as np
-from baseline_config import load_average
+from baseline_config import loadavg_text
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -60,7 +60,7 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=7)
     arguments = parser.parse_args()
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
-    print(f"bench/soak.py {' '.join(sys.argv[1:])}: load average {load_average()}")
+    print(f"bench/soak.py {' '.join(sys.argv[1:])}: load average {loadavg_text()}")
     with tempfile.TemporaryDirectory() as log_dir:
         system = build_system(log_dir=log_dir, context=Context())
         try:
@@ -143,7 +143,7 @@ def soak(system, arguments: argparse.Namespace) -> int:
                 f"  {(now - start) / 60:5.1f}  {resident_mb():6.1f} {resident_mb() - memory_start:+5.1f}  "
                 f"{len(os.listdir('/proc/self/task')):7d} {len(os.listdir('/proc/self/fd')):4d}  "
                 f"{percentile_text(latencies):>22s}  {percentile_text(failure_latencies):>16s}  "
-                f"{counts:>23s}  {load_average()}",
+                f"{counts:>23s}  {loadavg_text()}",
                 flush=True,
             )
             latencies.clear()
