@@ -34,6 +34,7 @@ Heights between the monitor's ``min_height`` and 0 count as 0 (sensor noise on t
 
 from __future__ import annotations
 
+import functools
 import math
 import threading
 from collections.abc import Sequence
@@ -66,6 +67,13 @@ class SafetyVerdict:
     level: bytes
     message: str
     values: dict[str, Any]
+
+
+@functools.lru_cache(maxsize=4)
+def envelope_domain(envelope: Any) -> tuple[ValidityDomain, float]:
+    """(validity domain, Ω₀ of its airframe) of a loaded envelope: read once, not at every state message."""
+    metadata = envelope.metadata
+    return ValidityDomain.from_metadata(metadata), float(metadata["airframe"]["nominal_rotor_speed"])
 
 
 def evaluate_safety(
@@ -127,10 +135,8 @@ def evaluate_safety(
     evidence = None
     if envelope is not None and not state_problem:
         query = envelope.query(height, forward_speed)
-        omega0 = float(envelope.metadata["airframe"]["nominal_rotor_speed"])
-        domain = ValidityDomain.from_metadata(envelope.metadata).check(
-            reading.climb_rate, rotor_speed, omega0, power_fraction=envelope.power_fraction
-        )
+        validity_domain, omega0 = envelope_domain(envelope)
+        domain = validity_domain.check(reading.climb_rate, rotor_speed, omega0, power_fraction=envelope.power_fraction)
         evidence = EnvelopeEvidence(query.status, query.margin, query.by_interpolation, domain)
         values["envelope_value"] = query.value
     decision = decide_safety_status(
