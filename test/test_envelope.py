@@ -497,3 +497,11 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     assert np.all(current.status[kept] == "unsafe") and np.all(current.value[kept] >= 0.25)
     assert current.metadata["refinement"]["sweep"] == "warm through not-safe nodes"
     assert {"sweep", "boundary"} <= set(current.metadata["compute"]["phase_ipopt_s"])
+
+
+def test_a_computed_envelope_records_where_its_answers_hold(small):
+    from helireach_ros.core.envelope.domain import ValidityDomain
+
+    assert small.metadata["validity_domain"] == ValidityDomain().to_metadata()
+    assert ValidityDomain.from_metadata(small.metadata) == ValidityDomain()
+

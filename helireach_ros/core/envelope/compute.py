@@ -64,6 +64,7 @@ from helireach_ros.core.envelope.data import (
     read_envelope_file,
     save_envelope,
 )
+from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.envelope.progress import NullProgress, Progress
 from helireach_ros.core.envelope.workers import SerialExecutor
 from helireach_ros.core.settings import PlannerSettings
@@ -621,6 +622,8 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
         "settings": dataclasses.asdict(job.settings),
         "method": job.settings.method,
         "power_fraction": float(job.power_fraction),
+        # where the answers hold (level trim at nominal rotor speed, within tolerances): core/envelope/domain.py
+        "validity_domain": ValidityDomain().to_metadata(),
         "status_codes": dict(STATUS_CODES, pending=PENDING),
         "plan_storage": "float32 per node: NLP primal, bound and constraint multipliers (planner.WarmStart); "
         "control breakpoints and values",
