@@ -153,6 +153,11 @@ class LiveEvaluator:
         self.evaluations = 0
         self.errors = 0
 
+    @property
+    def has_warm_start(self) -> bool:
+        """The next evaluation starts from the previous live solution (a fallback warm start is not needed)."""
+        return self._warm_start is not None
+
     def due(self, now_ns: int) -> bool:
         """Whether the next evaluation is due (one per period)."""
         return self._last_started_ns is None or now_ns - self._last_started_ns >= self.settings.period_ns

@@ -476,7 +476,9 @@ class LandingPlannerNode(Node):
             # Due half a period early: the timer keeps the rate, its jitter must not skip a period.
             if not self._live.due(now_ns + self._live.settings.period_ns // 2):
                 return
-            stored = self.envelope.nearest_plan(state[3], state[1]) if self.envelope is not None else None
+            # The envelope's nearest plan (~1 ms to find) only when there is no previous live solution to start from.
+            needs_fallback = self.envelope is not None and not self._live.has_warm_start
+            stored = self.envelope.nearest_plan(state[3], state[1]) if needs_fallback else None
             prepared = self._live.prepare(state, stamp_ns, now_ns, stored.warm_start if stored is not None else None)
             if prepared is None:
                 return  # the state is older than live_max_state_age
