@@ -124,18 +124,20 @@ def test_a_hung_worker_is_killed_after_the_job_timeout_and_restarted(pool, airfr
 
 
 def test_failure_plans_never_wait_for_live_evaluations(pool, airframe) -> None:
-    # Four cold live evaluations, then a failure plan: one worker stays free of live work, so the failure
-    # plan runs at once and is done before the second live evaluation (which waits for the first) ends.
+    # Four live evaluations, the worker running the first one frozen (SIGSTOP): the other worker stays free of
+    # live work, so a failure plan submitted now is solved at once, and no live job spills onto that worker.
+    # Freezing the worker makes this independent of how long either solve takes.
     assert pool.wait_ready(120.0, 2)
     live_state = initial_state_after_failure(airframe, 600 * FT, 30 * KT).as_array()
-    done: list[str] = []
-    live = [pool.submit(live_state, priority=PRIORITY_LIVE) for _ in range(4)]
-    failure_state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
-    failure = pool.submit(failure_state, priority=PRIORITY_FAILURE)
-    for index, future in enumerate(live):
-        future.add_done_callback(lambda _, index=index: done.append(f"live{index}"))
-    failure.add_done_callback(lambda _: done.append("failure"))
-    failure.result(timeout=30.0)
+    live = [pool.submit(live_state, priority=PRIORITY_LIVE, timeout_s=60.0) for _ in range(4)]
+    live_worker = _busy_worker_pid(pool)
+    os.kill(live_worker, signal.SIGSTOP)
+    try:
+        failure_state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+        failure = pool.submit(failure_state, priority=PRIORITY_FAILURE, timeout_s=30.0)
+        failure.result(timeout=30.0)
+        assert not any(future.done() for future in live), "a live job ran on the worker kept for failures"
+    finally:
+        os.kill(live_worker, signal.SIGCONT)
     for future in live:
-        future.result(timeout=30.0)
-    assert done.index("failure") < done.index("live1"), done
+        future.result(timeout=60.0)
