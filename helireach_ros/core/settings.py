@@ -14,7 +14,7 @@ from helireach_ros.core.resources import config_path
 
 __all__ = ["METHODS", "PlannerSettings", "load_settings"]
 
-METHODS = ("verified", "paper")
+METHODS = ("flyable", "verified", "paper")
 
 
 @dataclass(frozen=True)
@@ -22,8 +22,11 @@ class PlannerSettings:
     """How a landing NLP is transcribed and solved. Immutable and hashable: solvers are cached on it.
 
     Attributes:
-        method: ``"verified"`` (free-final-time multi-interval Radau in physical time, the default)
-            or ``"paper"`` (the paper's single-interval LGR with time freeze and log time transform).
+        method: ``"flyable"`` (the default: the verified mesh with continuous, rate-limited controls, the
+            airframe's attitude and touchdown-attitude limits, touchdown on the ground and no climbing once
+            below the commit height; :mod:`helireach_ros.core.transcription.flyable`), ``"verified"``
+            (free-final-time multi-interval Radau in physical time, piecewise-constant controls, the paper's
+            limits) or ``"paper"`` (the paper's single-interval LGR with time freeze and log time transform).
         intervals: verified: number of collocation intervals.
         degree: verified: Radau IIA points per interval.
         final_interval_ratio: verified: length of the last interval over the first; < 1 puts more
@@ -49,6 +52,9 @@ class PlannerSettings:
             0.6 % of Ω₀); the replay then checks the true limits.
         rotor_speed_replay_margin: tolerance of the replay's rotor-speed check, fraction of Ω₀
             (default 0: the true limits).
+        reaction_delay_s: s after the failure during which the controls stay at their pre-failure values
+            (the pilot's or the automation's reaction time) before the plan takes over; the plan carries this
+            segment and the replay flies it. 0 = the plan starts at the failure.
     """
 
     method: str = "verified"
@@ -68,6 +74,7 @@ class PlannerSettings:
     replay_samples_per_interval: int = 8
     rotor_speed_backoff: float = 0.01
     rotor_speed_replay_margin: float = 0.0
+    reaction_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
         problems = []
@@ -95,6 +102,7 @@ class PlannerSettings:
             ("replay_relative_tolerance", 1e-12, 1e-3),
             ("rotor_speed_backoff", 0.0, 0.1),
             ("rotor_speed_replay_margin", 0.0, 0.1),
+            ("reaction_delay_s", 0.0, 10.0),
         ):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
