@@ -24,6 +24,7 @@ from helireach_ros.core.units import UnitError, convert_to_si
 __all__ = [
     "Airframe",
     "ConfigError",
+    "FlyabilityLimits",
     "LandingLimits",
     "isa_density",
     "load_airframe",
@@ -64,6 +65,36 @@ class LandingLimits:
 
 
 @dataclass(frozen=True)
+class FlyabilityLimits:
+    """What a real helicopter can fly, beyond the paper's point-mass limits (the ``flyable`` plans respect them).
+
+    Pitch θ is positive nose down (the model's convention); the limits are magnitudes.
+
+    Attributes:
+        max_nose_up_pitch: the flare attitude limit, θ ≥ −this along the path, rad.
+        max_nose_down_pitch: θ ≤ this along the path, rad.
+        touchdown_max_nose_up_pitch: at ground contact θ ≥ −this (tail strike), rad.
+        touchdown_max_nose_down_pitch: at ground contact θ ≤ this (skid toes / nose gear first), rad.
+        max_pitch_rate: |dθ/dt| ≤ this, rad/s.
+        collective_full_travel_time: the fastest the collective moves through its whole range (C_T from 0 to
+            its stall limit), s: |dC_T/dt| ≤ C_T,max / this.
+        commit_height: below this height the plan may not climb again (h non-increasing until touchdown: no
+            ground skims, no zooms back up from near the ground), m.
+        touchdown_min_rotor_speed_ratio: below the commit height (the final flare and cushion) Ω may droop to
+            this × Ω₀ instead of ``limits.min_rotor_speed_ratio``: the cushion trades rotor speed for thrust.
+    """
+
+    max_nose_up_pitch: float = math.radians(25.0)
+    max_nose_down_pitch: float = math.radians(25.0)
+    touchdown_max_nose_up_pitch: float = math.radians(12.0)
+    touchdown_max_nose_down_pitch: float = math.radians(5.0)
+    max_pitch_rate: float = math.radians(20.0)
+    collective_full_travel_time: float = 1.0
+    commit_height: float = 20.0 * 0.3048
+    touchdown_min_rotor_speed_ratio: float = 0.80
+
+
+@dataclass(frozen=True)
 class Airframe:
     """A helicopter's parameters for the paper's six-state model, all SI.
 
@@ -82,6 +113,8 @@ class Airframe:
         density_altitude: m; sets the air density through the ISA.
         gravity: g, m/s².
         limits: the landing and path limits.
+        flyability: the attitude, rate and touchdown-attitude limits of flyable plans (the YAML's optional
+            ``flyability`` section; the :class:`FlyabilityLimits` defaults, all assumed, where it is missing).
         sources: where each number came from (not part of equality or the hash).
     """
 
@@ -99,6 +132,7 @@ class Airframe:
     density_altitude: float
     gravity: float
     limits: LandingLimits
+    flyability: FlyabilityLimits = FlyabilityLimits()
     sources: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     @property
@@ -120,6 +154,11 @@ class Airframe:
     def max_thrust_coefficient(self) -> float:
         """The stall limit on C_T."""
         return self.limits.max_thrust_coefficient_over_solidity * self.rotor_solidity
+
+    @property
+    def max_thrust_coefficient_rate(self) -> float:
+        """|dC_T/dt| limit of flyable plans, 1/s: the whole collective range in ``collective_full_travel_time``."""
+        return self.max_thrust_coefficient / self.flyability.collective_full_travel_time
 
     def with_conditions(self, gross_weight: float | None = None, density_altitude: float | None = None) -> Airframe:
         """Returns a copy at another gross weight (N) and/or density altitude (m)."""
@@ -189,6 +228,18 @@ _LIMITS_SCHEMA: dict[str, tuple[str, float, float]] = {
 }
 
 
+_FLYABILITY_SCHEMA: dict[str, tuple[str, float, float]] = {
+    "max_nose_up_pitch": ("angle", math.radians(1.0), math.radians(89.0)),
+    "max_nose_down_pitch": ("angle", math.radians(1.0), math.radians(89.0)),
+    "touchdown_max_nose_up_pitch": ("angle", 0.0, math.radians(89.0)),
+    "touchdown_max_nose_down_pitch": ("angle", 0.0, math.radians(89.0)),
+    "max_pitch_rate": ("angular_speed", math.radians(0.5), math.radians(360.0)),
+    "collective_full_travel_time": ("time", 0.01, 30.0),
+    "commit_height": ("length", 0.0, 100.0),
+    "touchdown_min_rotor_speed_ratio": ("dimensionless", 0.1, 1.0),
+}
+
+
 def _check_range(key: str, value: float, low: float, high: float, unit: str, where: str = "") -> None:
     if not math.isfinite(value) or not low <= value <= high:
         raise ConfigError(f"{where}{key} = {value!r} {unit} is outside the physical range [{low:g}, {high:g}] {unit}")
@@ -250,7 +301,7 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
     """
     if not isinstance(document, dict):
         raise ConfigError(f"{where}an airframe file must be a mapping with name, parameters, limits")
-    allowed = {"name", "description", "parameters", "limits"}
+    allowed = {"name", "description", "parameters", "limits", "flyability"}
     unknown = sorted(set(document) - allowed)
     if unknown:
         raise ConfigError(f"{where}unknown top-level key(s): {', '.join(unknown)}")
@@ -261,10 +312,27 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
     limits, limit_sources = _parse_section(document["limits"], _LIMITS_SCHEMA, "limits", where)
     if limits["min_rotor_speed_ratio"] >= limits["max_rotor_speed_ratio"]:
         raise ConfigError(f"{where}limits.min_rotor_speed_ratio must be below limits.max_rotor_speed_ratio")
+    if "flyability" in document:
+        flyability, flyability_sources = _parse_section(document["flyability"], _FLYABILITY_SCHEMA, "flyability", where)
+        flyability_limits = FlyabilityLimits(**flyability)
+    else:  # airframe files older than the flyable plans: the documented assumed defaults, said so in the sources
+        flyability_limits = FlyabilityLimits()
+        flyability_sources = [(f"flyability.{key}", "helireach default (assumed)") for key in _FLYABILITY_SCHEMA]
+    if flyability_limits.touchdown_max_nose_up_pitch > flyability_limits.max_nose_up_pitch or (
+        flyability_limits.touchdown_max_nose_down_pitch > flyability_limits.max_nose_down_pitch
+    ):
+        raise ConfigError(f"{where}flyability: the touchdown attitude window must lie inside the path's pitch limits")
+    if flyability_limits.touchdown_min_rotor_speed_ratio > limits["min_rotor_speed_ratio"]:
+        raise ConfigError(
+            f"{where}flyability.touchdown_min_rotor_speed_ratio must not exceed limits.min_rotor_speed_ratio"
+        )
+    if max(flyability_limits.max_nose_up_pitch, flyability_limits.max_nose_down_pitch) > limits["max_pitch_angle"]:
+        raise ConfigError(f"{where}flyability: the pitch limits must lie inside limits.max_pitch_angle")
     return Airframe(
         name=str(document["name"]),
         limits=LandingLimits(**limits),
-        sources=tuple(parameter_sources + limit_sources),
+        flyability=flyability_limits,
+        sources=tuple(parameter_sources + limit_sources + flyability_sources),
         **parameters,
     )
 

@@ -8,7 +8,8 @@ asks for. (An ``.npz`` archive read with ``allow_pickle=False`` would be as safe
 ~3 ms per plan; this costs ~0.1 ms.)
 
 A dataclass is flattened field by field into named arrays (``"replay.touchdown_state"``). Supported field
-values: numpy arrays, ``float``/``int``/``bool``/``str``, nested dataclasses, ``dict[str, float]``
+values: numpy arrays, ``float``/``int``/``bool``/``str``, ``tuple[str, ...]`` (a text array), nested dataclasses,
+``dict[str, float]``
 (stored as ``<name>.__keys__``/``<name>.__values__``) and ``None`` (stored as the marker
 ``<name>.__none__``). Decoding follows the reader's type hints, so bytes written for another class (a
 missing field) raise :class:`ValueError`.
@@ -45,6 +46,8 @@ def _flatten(value: Any, prefix: str, arrays: dict[str, np.ndarray]) -> None:
         arrays[f"{prefix}.{_VALUES}"] = np.array([float(item) for item in value.values()], dtype=float)
     elif isinstance(value, np.ndarray | bool | int | float | str | np.generic):
         arrays[prefix] = np.asarray(value)
+    elif isinstance(value, tuple) and all(isinstance(item, str) for item in value):
+        arrays[prefix] = np.array(value, dtype=str).reshape(-1)
     else:
         raise TypeError(f"{prefix}: cannot encode a {type(value).__name__}")
 
@@ -120,6 +123,10 @@ def _build(hint: Any, prefix: str, arrays: Any) -> Any:
     array = arrays[prefix]
     if origin is np.ndarray:
         return np.array(array)
+    if origin is tuple:
+        if array.ndim != 1 or array.dtype.kind != "U":
+            raise ValueError(f"{prefix}: expected a tuple of text, got {array.dtype} {array.shape}")
+        return tuple(str(item) for item in array)
     if origin in (bool, int, float, str):
         if array.shape != ():
             raise ValueError(f"{prefix}: expected a scalar, got shape {array.shape}")

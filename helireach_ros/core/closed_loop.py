@@ -105,7 +105,11 @@ def fly_closed_loop(
             if replanning_ends(state[3], remaining, settings.min_height, settings.min_remaining):
                 replanning = False
             else:
-                plan = planner.plan(state, current[1].warm_start if current is not None else None)
+                if current is None:  # the failure plan: from the trim flown before, after the reaction delay
+                    plan = planner.plan(state)
+                else:  # a re-plan: from the control being flown now (continuous), no reaction delay
+                    flying = current[1].controls_at([now - current[0]])[:, 0]
+                    plan = planner.plan(state, current[1].warm_start, initial_control=flying, reaction_delay_s=0.0)
                 if plan.solver.success:
                     plans += 1
                     unsafe += not plan.safe

@@ -48,6 +48,7 @@ __all__ = [
     "smooth_positive",
     "state_from_sensors",
     "steady_autorotation",
+    "trim_controls",
     "trim_flight",
     "trim_level_flight",
 ]
@@ -238,6 +239,22 @@ def trim_flight(airframe: Airframe, forward_speed: float, climb_rate: float = 0.
 def trim_level_flight(airframe: Airframe, forward_speed: float) -> TrimCondition:
     """Trims level flight (y = 0): :func:`trim_flight` at zero climb rate."""
     return trim_flight(airframe, forward_speed, 0.0)
+
+
+def trim_controls(airframe: Airframe, state) -> np.ndarray:
+    """The controls (C_T, θ) of steady flight at a state's forward speed and climb rate: what was flown before a
+    failure from that state (the flyable plans start from them).
+
+    Where no powered trim exists (a descent the rotor autorotates in, C_T beyond stall, v < 0), the level-flight
+    trim at the same speed (clipped to ≥ 0) stands in: the nearest steady flight the aircraft could have been in.
+    """
+    state = np.asarray(state, dtype=float).reshape(-1)
+    speed = max(float(state[1]), 0.0)
+    try:
+        trim = trim_flight(airframe, speed, -float(state[0]))
+    except ValueError:
+        trim = trim_level_flight(airframe, speed)
+    return np.array([trim.thrust_coefficient, trim.pitch_angle])
 
 
 def initial_state_after_failure(

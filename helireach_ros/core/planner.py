@@ -20,13 +20,14 @@ import numpy as np
 
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.compiled_nlp import CodegenSettings
-from helireach_ros.core.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState
+from helireach_ros.core.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState, trim_controls
 from helireach_ros.core.settings import PlannerSettings
-from helireach_ros.core.transcription.base import SUCCESS_STATUSES, Transcription, terminal_cost
+from helireach_ros.core.transcription.base import SUCCESS_STATUSES, DecodedPlan, Transcription, terminal_cost
+from helireach_ros.core.transcription.flyable import FlyableTranscription
 from helireach_ros.core.transcription.paper import PaperTranscription
 from helireach_ros.core.transcription.verified import VerifiedTranscription
 from helireach_ros.core.units import FT, KT
-from helireach_ros.core.verification import ReplaySummary, control_function, replay_plan
+from helireach_ros.core.verification import ReplaySummary, control_function, replay_plan, segment_integrator
 
 __all__ = [
     "STATUSES",
@@ -39,8 +40,19 @@ __all__ = [
 ]
 
 STATUSES = ("safe", "unsafe", "unverified", "failed")
+TRANSCRIPTIONS: dict[str, type[Transcription]] = {
+    "flyable": FlyableTranscription,
+    "verified": VerifiedTranscription,
+    "paper": PaperTranscription,
+}
+# Solver statuses of plans the reaction delay decides alone (no NLP): the delay segment is the plan, the replay
+# judges it (with the flyable rule, the held controls fly on to the ground).
+GROUND_DURING_DELAY = "ground contact during the reaction delay"
+ROTOR_LIMIT_DURING_DELAY = "rotor speed outside its limits during the reaction delay"
+DECIDED_BY_DELAY = (GROUND_DURING_DELAY, ROTOR_LIMIT_DURING_DELAY)
 
 log = logging.getLogger(__name__)
+_DELAY_SAMPLES = 20  # states checked along the reaction-delay segment (ground, rotor limits)
 
 
 @dataclass(frozen=True)
@@ -68,7 +80,7 @@ class LandingPlan:
     """A landing plan from one initial state, with its verification.
 
     Attributes:
-        method: ``"verified"`` or ``"paper"``.
+        method: ``"flyable"``, ``"verified"`` or ``"paper"``.
         status: ``"safe"`` (NLP value ≤ 0 and the replay lands within limits), ``"unsafe"``
             (value > 0), ``"unverified"`` (value ≤ 0 but the replay does not land within
             limits) or ``"failed"`` (the solver did not converge).
@@ -82,6 +94,9 @@ class LandingPlan:
         solver: IPOPT statistics.
         nominal_rotor_speed: Ω₀ of the airframe, rad/s (for rotor speed in percent).
         warm_start: this solution, to warm-start a later solve.
+        initial_control: (C_T, θ) flown at the plan's start (the flyable plan's controls start there).
+        reaction_delay_s: s at the start during which ``initial_control`` is held before the NLP's plan takes
+            over (part of ``times``, the control function and the replay).
     """
 
     method: str
@@ -100,6 +115,8 @@ class LandingPlan:
     solver: SolverStats
     nominal_rotor_speed: float
     warm_start: WarmStart = field(repr=False)
+    initial_control: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
+    reaction_delay_s: float = 0.0
 
     @property
     def safe(self) -> bool:
@@ -130,7 +147,9 @@ class LandingPlan:
             "method": self.method,
             "value": self.value,
             "time_to_land_s": self.time_to_land,
+            "reaction_delay_s": self.reaction_delay_s,
             "initial_state": dict(zip(STATE_NAMES, self.initial_state.tolist(), strict=True)),
+            "initial_control": dict(zip(CONTROL_NAMES, self.initial_control.tolist(), strict=True)),
             "touchdown": {
                 "time_s": self.replay.touchdown_time,
                 "descent_rate_ft_s": float(touchdown[0] / FT),
@@ -143,8 +162,10 @@ class LandingPlan:
                 "lands_within_limits": self.replay.lands_within_limits,
                 "ground_contact_time_s": self.replay.ground_contact_time,
                 "rotor_speed_within_limits": self.replay.rotor_speed_within_limits,
+                "judged_at_contact": self.replay.judged_at_contact,
                 "max_deviation": self.replay.max_deviation,
             },
+            "flyability": self.replay.flyability.to_dict(),
             "solver": {
                 "status": self.solver.status,
                 "success": self.solver.success,
@@ -190,8 +211,7 @@ class LandingPlanner:
         self.airframe = airframe
         self.settings = settings
         started = time.perf_counter()
-        scheme = VerifiedTranscription if settings.method == "verified" else PaperTranscription
-        self.transcription: Transcription = scheme(airframe, settings, codegen)
+        self.transcription: Transcription = TRANSCRIPTIONS[settings.method](airframe, settings, codegen)
         self.build_time_s = time.perf_counter() - started
         self._lock = threading.Lock()
         log.info("landing NLP (%s) built in %.2f s on %s", settings.method, self.build_time_s, self.nlp_functions)
@@ -201,53 +221,55 @@ class LandingPlanner:
         """Which NLP functions the solvers use: compiled (the library's path) or plain, and why."""
         return self.transcription.nlp_functions
 
-    def plan(self, state: HelicopterState | np.ndarray, warm_start: WarmStart | None = None) -> LandingPlan:
+    def plan(
+        self,
+        state: HelicopterState | np.ndarray,
+        warm_start: WarmStart | None = None,
+        initial_control: np.ndarray | None = None,
+        reaction_delay_s: float | None = None,
+    ) -> LandingPlan:
         """Solves, replays and classifies a landing from ``state``.
+
+        With a reaction delay > 0 the controls stay at ``initial_control`` for the delay (integrated
+        as the replay does), the NLP plans from the state that leads to, and the plan carries the delay segment.
 
         Args:
             state: the state at the failure.
             warm_start: a previous plan's :attr:`LandingPlan.warm_start` (same airframe/settings).
+            initial_control: (C_T, θ) being flown at ``state`` (None: the trim of steady flight at its speed and
+                climb rate, :func:`~helireach_ros.core.model.trim_controls`, i.e. the flight before a failure).
+                Re-plans pass the current plan's control, so the flyable controls stay continuous.
+            reaction_delay_s: s the controls stay at ``initial_control`` first (None: ``settings.reaction_delay_s``;
+                re-plans during a descent pass 0).
 
         Raises:
-            ValueError: for a non-finite or non-physical state, or a warm start of another NLP.
+            ValueError: for a non-finite or non-physical state or control, or a warm start of another NLP.
         """
         initial = state.as_array() if isinstance(state, HelicopterState) else np.asarray(state, dtype=float)
         initial = initial.reshape(-1)
         _validate_state(initial, self.airframe)
+        control = self._initial_control(initial, initial_control)
         transcription = self.transcription
-        if warm_start is not None and warm_start.primal.shape != transcription.lbx.shape:
+        if warm_start is not None and (
+            warm_start.primal.shape != transcription.lbx.shape
+            or warm_start.constraint_multipliers.shape != transcription.lbg.shape
+        ):
             raise ValueError("warm start comes from another NLP (different method or resolution)")
-        arguments: dict[str, Any] = {
-            "p": initial,
-            "lbx": transcription.lbx,
-            "ubx": transcription.ubx,
-            "lbg": transcription.lbg,
-            "ubg": transcription.ubg,
-        }
-        if warm_start is None:
-            solver = transcription.cold_solver
-            arguments["x0"] = transcription.initial_guess(initial)
+        delay = self.settings.reaction_delay_s if reaction_delay_s is None else float(reaction_delay_s)
+        if not (np.isfinite(delay) and 0.0 <= delay <= 10.0):
+            raise ValueError(f"the reaction delay must lie in [0, 10] s, got {reaction_delay_s!r}")
+        start, outcome = self._after_delay(initial, control, delay) if delay > 0.0 else (initial, "")
+        if outcome:
+            decoded, solver_stats, warm = self._delay_only(initial, start, control, delay, outcome, warm_start)
         else:
-            solver = transcription.warm_solver
-            arguments["x0"] = warm_start.primal
-            arguments["lam_x0"] = warm_start.bound_multipliers
-            arguments["lam_g0"] = warm_start.constraint_multipliers
-        with self._lock:
-            started = time.perf_counter()
-            result = solver(**arguments)
-            elapsed_ms = 1e3 * (time.perf_counter() - started)
-            stats = solver.stats()
-        primal = np.asarray(result["x"]).reshape(-1)
-        decoded = transcription.decode(primal, initial)
-        solver_stats = SolverStats(
-            status=str(stats.get("return_status", "unknown")),
-            success=str(stats.get("return_status")) in SUCCESS_STATUSES,
-            iterations=int(stats.get("iter_count", -1)),
-            solve_time_ms=elapsed_ms,
-            warm_started=warm_start is not None,
-        )
-        value = float(terminal_cost(self.airframe, decoded.node_states[:, -1]))
+            decoded, solver_stats, warm = self._solve(np.concatenate([start, control]), warm_start)
+            if delay > 0.0:
+                decoded = _with_delay(decoded, initial, control, delay)
         replay = replay_plan(self.airframe, self.settings, initial, decoded)
+        if solver_stats.status in DECIDED_BY_DELAY:
+            value = replay.value
+        else:
+            value = float(terminal_cost(self.airframe, decoded.node_states[:, -1]))
         if not solver_stats.success:
             status = "failed"
         elif value > 0.0:
@@ -272,10 +294,109 @@ class LandingPlanner:
             replay=replay,
             solver=solver_stats,
             nominal_rotor_speed=self.airframe.nominal_rotor_speed,
-            warm_start=WarmStart(
-                primal, np.asarray(result["lam_x"]).reshape(-1), np.asarray(result["lam_g"]).reshape(-1)
-            ),
+            warm_start=warm,
+            initial_control=control,
+            reaction_delay_s=delay,
         )
+
+    def _initial_control(self, state: np.ndarray, initial_control: np.ndarray | None) -> np.ndarray:
+        if initial_control is None:
+            return trim_controls(self.airframe, state)
+        control = np.asarray(initial_control, dtype=float).reshape(-1)
+        if control.shape != (2,) or not np.all(np.isfinite(control)):
+            raise ValueError(f"the initial control is (C_T, theta), finite; got {initial_control!r}")
+        return control
+
+    def _after_delay(self, state: np.ndarray, control: np.ndarray, delay: float) -> tuple[np.ndarray, str]:
+        """The state after ``delay`` s of constant ``control`` (the replay's integrator, so both agree), and
+        ``""`` or the :data:`DECIDED_BY_DELAY` status when the delay alone decides the landing."""
+        settings, limits = self.settings, self.airframe.limits
+        integrator = segment_integrator(self.airframe, _DELAY_SAMPLES, settings.replay_relative_tolerance)
+        try:
+            samples = np.asarray(integrator(x0=state, p=np.concatenate([control, control, [delay]]))["xf"])
+        except RuntimeError as error:
+            raise ValueError(f"the reaction-delay segment cannot be integrated: {error}") from None
+        end = samples[:, -1].copy()
+        end[5] = max(float(end[5]), 0.0)
+        omega0 = self.airframe.nominal_rotor_speed
+        if np.any(samples[3] < -limits.ground_clearance):
+            return end, GROUND_DURING_DELAY
+        if np.any(samples[2] < limits.min_rotor_speed_ratio * omega0) or np.any(
+            samples[2] > limits.max_rotor_speed_ratio * omega0
+        ):
+            return end, ROTOR_LIMIT_DURING_DELAY
+        return end, ""
+
+    def _solve(self, parameter: np.ndarray, warm_start: WarmStart | None) -> tuple[DecodedPlan, SolverStats, WarmStart]:
+        transcription = self.transcription
+        arguments: dict[str, Any] = {
+            "p": parameter,
+            "lbx": transcription.lbx,
+            "ubx": transcription.ubx,
+            "lbg": transcription.lbg,
+            "ubg": transcription.ubg,
+        }
+        if warm_start is None:
+            solver = transcription.cold_solver
+            arguments["x0"] = transcription.initial_guess(parameter)
+        else:
+            solver = transcription.warm_solver
+            arguments["x0"] = warm_start.primal
+            arguments["lam_x0"] = warm_start.bound_multipliers
+            arguments["lam_g0"] = warm_start.constraint_multipliers
+        with self._lock:
+            started = time.perf_counter()
+            result = solver(**arguments)
+            elapsed_ms = 1e3 * (time.perf_counter() - started)
+            stats = solver.stats()
+        primal = np.asarray(result["x"]).reshape(-1)
+        solver_stats = SolverStats(
+            status=str(stats.get("return_status", "unknown")),
+            success=str(stats.get("return_status")) in SUCCESS_STATUSES,
+            iterations=int(stats.get("iter_count", -1)),
+            solve_time_ms=elapsed_ms,
+            warm_started=warm_start is not None,
+        )
+        warm = WarmStart(primal, np.asarray(result["lam_x"]).reshape(-1), np.asarray(result["lam_g"]).reshape(-1))
+        return transcription.decode(primal, parameter), solver_stats, warm
+
+    def _delay_only(
+        self,
+        initial: np.ndarray,
+        end: np.ndarray,
+        control: np.ndarray,
+        delay: float,
+        outcome: str,
+        warm_start: WarmStart | None,
+    ) -> tuple[DecodedPlan, SolverStats, WarmStart]:
+        """The delay decides (``outcome``): the plan is the delay segment, the replay judges it."""
+        transcription = self.transcription
+        times = np.array([0.0, delay])
+        states = np.column_stack([initial, end])
+        controls = np.column_stack([control, control])
+        decoded = DecodedPlan(delay, times, states, times, controls, "linear", times, states)
+        stats = SolverStats(outcome, True, 0, 0.0, False)
+        if warm_start is None:  # a valid warm start of this NLP, for a caller that chains solves
+            guess = transcription.initial_guess(np.concatenate([initial, control]))
+            warm_start = WarmStart(guess, np.zeros_like(guess), np.zeros_like(transcription.lbg))
+        return decoded, stats, warm_start
+
+
+def _with_delay(plan: DecodedPlan, initial: np.ndarray, control: np.ndarray, delay: float) -> DecodedPlan:
+    """The NLP's plan (from the state after the delay) preceded by the delay segment of constant ``control``."""
+    # Zero-order hold: ``control`` on [0, delay]. Linear: the NLP's first breakpoint is ``control`` too, so the
+    # function is constant over the delay.
+    control_times = np.concatenate([[0.0], plan.control_times + delay])
+    return DecodedPlan(
+        time_to_land=plan.time_to_land + delay,
+        node_times=np.concatenate([[0.0], plan.node_times + delay]),
+        node_states=np.column_stack([initial, plan.node_states]),
+        control_times=control_times,
+        control_values=np.column_stack([control, plan.control_values]),
+        control_interpolation=plan.control_interpolation,
+        curve_times=np.concatenate([[0.0], plan.curve_times + delay]),
+        curve_states=np.column_stack([initial, plan.curve_states]),
+    )
 
 
 def get_planner(
@@ -299,6 +420,7 @@ def plan_landing(
     airframe: Airframe,
     settings: PlannerSettings | None = None,
     warm_start: WarmStart | None = None,
+    initial_control: np.ndarray | None = None,
 ) -> LandingPlan:
     """Plans a landing after an engine failure from ``state`` and verifies it by replay.
 
@@ -306,10 +428,11 @@ def plan_landing(
         state: (y, v, Ω, h, z, P) in SI, e.g. from
             :func:`~helireach_ros.core.model.initial_state_after_failure`.
         airframe: the helicopter.
-        settings: transcription and solver settings (default: the ``verified`` method).
+        settings: transcription and solver settings (default: :class:`PlannerSettings`, the ``flyable`` method).
         warm_start: a previous plan's ``warm_start`` for the same airframe and settings.
+        initial_control: (C_T, θ) flown at ``state`` (None: the trim of steady flight there).
 
     Returns:
         The plan; ``plan.safe`` is True only if the NLP value is ≤ 0 and the replay confirms it.
     """
-    return get_planner(airframe, settings or PlannerSettings()).plan(state, warm_start)
+    return get_planner(airframe, settings or PlannerSettings()).plan(state, warm_start, initial_control)

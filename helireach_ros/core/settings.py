@@ -57,7 +57,7 @@ class PlannerSettings:
             segment and the replay flies it. 0 = the plan starts at the failure.
     """
 
-    method: str = "verified"
+    method: str = "flyable"
     intervals: int = 20
     degree: int = 3
     final_interval_ratio: float = 0.35

@@ -20,6 +20,7 @@ the NLP built once and warmed up.
 
 from __future__ import annotations
 
+import functools
 import heapq
 import itertools
 import multiprocessing
@@ -96,6 +97,8 @@ class _SolveRequest:
     state: np.ndarray
     warm_start: WarmStart | None
     cold_check: bool
+    initial_control: np.ndarray | None = None
+    reaction_delay_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -123,10 +126,13 @@ def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSe
             return
         try:
             request = decode_dataclass(_SolveRequest, data)
+            solve = functools.partial(
+                planner.plan, initial_control=request.initial_control, reaction_delay_s=request.reaction_delay_s
+            )
             if request.cold_check:
-                plan = solve_with_cold_check(planner.plan, request.state, request.warm_start)
+                plan = solve_with_cold_check(solve, request.state, request.warm_start)
             else:
-                plan = planner.plan(request.state, request.warm_start)
+                plan = solve(request.state, request.warm_start)
             reply = _SolveReply(plan, "")
         except (ValueError, RuntimeError) as error:
             reply = _SolveReply(None, f"{type(error).__name__}: {error}")
@@ -202,8 +208,13 @@ class SolverPool:
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
         cold_check: bool = False,
+        initial_control: np.ndarray | None = None,
+        reaction_delay_s: float | None = None,
     ) -> Future:
         """Queues a solve; the future gives the :class:`~helireach_ros.core.planner.LandingPlan`.
+
+        ``initial_control`` and ``reaction_delay_s`` are passed to
+        :meth:`~helireach_ros.core.planner.LandingPlanner.plan` (None: its defaults).
 
         ``cold_check``: a warm plan that is not safe is solved again cold in the worker
         (:func:`~helireach_ros.core.live_reachability.solve_with_cold_check`). The future raises
@@ -211,7 +222,9 @@ class SolverPool:
         died or did not answer within ``timeout_s`` (counted from when a worker took the job).
         """
         future: Future = Future()
-        request = _SolveRequest(np.asarray(state, dtype=float).reshape(-1), warm_start, cold_check)
+        control = None if initial_control is None else np.asarray(initial_control, dtype=float).reshape(-1)
+        delay = None if reaction_delay_s is None else float(reaction_delay_s)
+        request = _SolveRequest(np.asarray(state, dtype=float).reshape(-1), warm_start, cold_check, control, delay)
         payload = encode_dataclass(request)
         job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority)
         with self._lock:

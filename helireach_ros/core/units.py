@@ -52,6 +52,7 @@ _UNITS: dict[str, tuple[str, float]] = {
     "slug*ft^2": ("inertia", (LBF / FT) * FT**2),
     "rad/s": ("angular_speed", 1.0),
     "rpm": ("angular_speed", 2.0 * math.pi / 60.0),
+    "deg/s": ("angular_speed", math.pi / 180.0),
     "rad": ("angle", 1.0),
     "deg": ("angle", math.pi / 180.0),
     "s": ("time", 1.0),

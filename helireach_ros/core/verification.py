@@ -13,6 +13,13 @@ nothing with the collocation scheme but the model, and judges the landing on tha
 * the landing is within limits when that value is ≤ 0 and the rotor speed stayed within its
   true limits until then (the NLP keeps a back-off from them at its nodes).
 
+Flyable plans (``method: flyable``) are judged **at ground contact**, as a real landing is: the last
+control is held after the plan's end (for up to :data:`CONTACT_SEARCH_S`) until the path meets the
+ground; the value is J of the state at contact, the rotor must stay within its limits until then (below the
+commit height: the airframe's touchdown rotor limit), and the
+flown control function and path must meet the airframe's flyability limits
+(:func:`~helireach_ros.core.flyability.check_flyability`). A path that never meets the ground does not land.
+
 The model is not stiff over the flight envelope, so CVODES runs its Adams method with functional
 iteration (30 % faster than BDF here, same result to 1e-5); should it fail, the replay judges the
 part it integrated, which cannot make a plan look better.
@@ -27,11 +34,14 @@ import casadi as ca
 import numpy as np
 
 from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.flyability import FlyabilityReport, check_flyability
 from helireach_ros.core.model import STATE_NAMES, dynamics_function
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.transcription.base import DecodedPlan, terminal_cost
 
-__all__ = ["ReplaySummary", "control_function", "replay_plan", "segment_integrator"]
+__all__ = ["CONTACT_SEARCH_S", "ReplaySummary", "control_function", "replay_plan", "segment_integrator"]
+
+CONTACT_SEARCH_S = 10.0  # s a flyable plan's last control is held after its end, looking for ground contact
 
 
 @dataclass(frozen=True)
@@ -49,6 +59,10 @@ class ReplaySummary:
         max_deviation: per state, the largest |replay − plan| at the plan's nodes (SI).
         times: the dense replay times, s.
         states: the dense replayed states, 6 × len(times).
+        flyability: rates, attitudes, touchdown attitude and commit-height climb of the flown controls and
+            path (always measured).
+        judged_at_contact: the landing was judged at ground contact and needs ``flyability`` within limits
+            (flyable plans); otherwise the paper's rule (best J along the path) and flyability is reported only.
     """
 
     value: float
@@ -60,6 +74,8 @@ class ReplaySummary:
     max_deviation: dict[str, float]
     times: np.ndarray
     states: np.ndarray
+    flyability: FlyabilityReport
+    judged_at_contact: bool
 
 
 def control_function(control_times: np.ndarray, control_values: np.ndarray, interpolation: str, times) -> np.ndarray:
@@ -102,8 +118,9 @@ def segment_integrator(airframe: Airframe, samples: int, relative_tolerance: flo
                          grid, options)  # fmt: skip
 
 
-def _segments(plan: DecodedPlan) -> list[tuple[float, float, np.ndarray, np.ndarray]]:
-    """(start, end, control at start, control at end) for each piece of the control function."""
+def _segments(plan: DecodedPlan, hold_after: float = 0.0) -> list[tuple[float, float, np.ndarray, np.ndarray]]:
+    """(start, end, control at start, control at end) for each piece of the control function, plus ``hold_after``
+    seconds of the last control after the plan's end."""
     breakpoints = plan.control_times
     pieces = []
     for k in range(len(breakpoints) - 1):
@@ -120,7 +137,23 @@ def _segments(plan: DecodedPlan) -> list[tuple[float, float, np.ndarray, np.ndar
             plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land]
         )[:, 0]
         pieces.append((float(breakpoints[-1]), plan.time_to_land, last, last))
+    if hold_after > 0.0:
+        last = control_function(
+            plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land]
+        )[:, 0]
+        end = max(plan.time_to_land, float(breakpoints[-1]))
+        pieces.append((end, end + hold_after, last, last))
     return pieces
+
+
+def _flown_controls(plan: DecodedPlan, end_time: float) -> tuple[np.ndarray, np.ndarray]:
+    """The control function's breakpoints and values from 0 to ``end_time`` (the value there included)."""
+    inside = plan.control_times[plan.control_times < end_time - 1e-9]
+    times = np.append(inside, end_time)
+    if plan.control_interpolation == "zero_order_hold":
+        count = len(inside)
+        return times, plan.control_values[:, : max(count, 1)]
+    return times, control_function(plan.control_times, plan.control_values, "linear", times)
 
 
 def replay_plan(
@@ -135,10 +168,11 @@ def replay_plan(
         plan: the decoded NLP solution.
     """
     integrator = segment_integrator(airframe, settings.replay_samples_per_interval, settings.replay_relative_tolerance)
-    state = np.asarray(initial_state, dtype=float)
+    state = np.asarray(initial_state, dtype=float)[:6]
     times, states = [0.0], [state]
     clearance = airframe.limits.ground_clearance
-    for start, end, control_start, control_end in _segments(plan):
+    at_contact = settings.method == "flyable"
+    for start, end, control_start, control_end in _segments(plan, CONTACT_SEARCH_S if at_contact else 0.0):
         parameters = np.concatenate([control_start, control_end, [end - start]])
         try:
             outputs = np.asarray(integrator(x0=state, p=parameters)["xf"])
@@ -169,20 +203,36 @@ def replay_plan(
             times_array, states_array = times_array[:1], states_array[:, :1]
         ground_contact_time = float(times_array[-1])
     costs = terminal_cost(airframe, states_array)
-    best = int(np.argmin(costs))
+    # at contact: the state there (or, without contact, the end of the search, which cannot land)
+    best = len(costs) - 1 if at_contact else int(np.argmin(costs))
     value = float(costs[best])
+    flown_times, flown_values = _flown_controls(plan, float(times_array[best]))
+    touchdown_pitch = None
+    if ground_contact_time is not None and best == len(costs) - 1:
+        touchdown_pitch = float(flown_values[1, -1])
+    flyability = check_flyability(
+        airframe, flown_times, flown_values, plan.control_interpolation, states_array[3, : best + 1], touchdown_pitch
+    )
 
     omega0 = airframe.nominal_rotor_speed
     margin = settings.rotor_speed_replay_margin * omega0
     rotor = states_array[2, : best + 1]
+    low = np.full(rotor.shape, airframe.limits.min_rotor_speed_ratio)
+    if at_contact:  # flyable: the touchdown limit below the commit height
+        low[states_array[3, : best + 1] < airframe.flyability.commit_height] = (
+            airframe.flyability.touchdown_min_rotor_speed_ratio
+        )
     rotor_ok = bool(
-        np.all(rotor >= airframe.limits.min_rotor_speed_ratio * omega0 - margin)
+        np.all(rotor >= low * omega0 - margin)
         and np.all(rotor <= airframe.limits.max_rotor_speed_ratio * omega0 + margin)
     )
     deviation = _node_deviation(times_array, states_array, plan)
+    lands = bool(value <= 0.0 and rotor_ok and np.isfinite(value))
+    if at_contact:
+        lands = lands and ground_contact_time is not None and flyability.within_limits
     return ReplaySummary(
         value=value,
-        lands_within_limits=bool(value <= 0.0 and rotor_ok and np.isfinite(value)),
+        lands_within_limits=lands,
         touchdown_time=float(times_array[best]),
         touchdown_state=states_array[:, best].copy(),
         ground_contact_time=ground_contact_time,
@@ -190,6 +240,8 @@ def replay_plan(
         max_deviation=deviation,
         times=times_array,
         states=states_array,
+        flyability=flyability,
+        judged_at_contact=at_contact,
     )
 
 

@@ -28,9 +28,10 @@ from helireach_ros.core.compiled_nlp import CodegenSettings, ipopt_solvers
 from helireach_ros.core.model import dynamics_function, trim_level_flight
 from helireach_ros.core.settings import PlannerSettings
 
-__all__ = ["DecodedPlan", "Transcription", "terminal_cost"]
+__all__ = ["PARAMETER_SIZE", "DecodedPlan", "Transcription", "terminal_cost"]
 
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+PARAMETER_SIZE = 8  # (y, v, Ω, h, z, P) at the start, then the controls (C_T, θ) being flown then
 
 
 def terminal_cost(airframe: Airframe, state) -> float:
@@ -78,9 +79,10 @@ class DecodedPlan:
 class Transcription(ABC):
     """A landing NLP built once for an (airframe, settings) pair and solved for many initial states.
 
-    The initial state is the NLP parameter. Subclasses define the decision vector, constraints,
-    cold initial guess and decoding; this class supplies scaling, bounds and the IPOPT solvers (on compiled
-    NLP functions when the cache has them, :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which).
+    The NLP parameter is the initial state and the control flown then (:data:`PARAMETER_SIZE`). Subclasses
+    define the decision vector, constraints, cold initial guess and decoding; this class supplies scaling,
+    bounds and the IPOPT solvers (on compiled NLP functions when the cache has them,
+    :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which).
     """
 
     def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
@@ -101,9 +103,13 @@ class Transcription(ABC):
         self.state_upper = np.array([100.0, 120.0, rotor_high, 1e4, 1e5, 1e9])
         self.control_lower = np.array([0.0, -limits.max_pitch_angle])
         self.control_upper = np.array([airframe.max_thrust_coefficient, limits.max_pitch_angle])
-        self.initial_state = ca.SX.sym("x0", 6)
+        # The NLP parameter: the initial state and the control flown at that moment (only the flyable scheme,
+        # whose controls are continuous, uses the control; one parameter layout keeps every caller alike).
+        self.parameters = ca.SX.sym("p", PARAMETER_SIZE)
+        self.initial_state = self.parameters[0:6]
+        self.initial_control = self.parameters[6:8]
         self._build()
-        nlp = {"x": self.decision, "p": self.initial_state, "f": self.objective, "g": self.constraints}
+        nlp = {"x": self.decision, "p": self.parameters, "f": self.objective, "g": self.constraints}
         base = {
             "ipopt.print_level": 0,
             "ipopt.sb": "yes",

@@ -100,7 +100,7 @@ class PaperTranscription(Transcription):
         freeze = np.clip(solution[1 + 2 * count : 1 + 3 * count], 0.0, 1.0)
         states = solution[1 + 3 * count :].reshape(6, count, order="F") * self.state_scale[:, None]
         node_times = self._node_times(freeze)
-        node_states = np.column_stack([np.asarray(initial_state, dtype=float), states])
+        node_states = np.column_stack([np.asarray(initial_state, dtype=float)[:6], states])
         return DecodedPlan(
             float(node_times[-1]),
             node_times,

@@ -41,15 +41,7 @@ class VerifiedTranscription(Transcription):
     def _build(self) -> None:
         settings = self.settings
         intervals, degree = settings.intervals, settings.degree
-        self.fractions = interval_fractions(intervals, settings.final_interval_ratio)
-        self.interval_starts = np.concatenate([[0.0], np.cumsum(self.fractions)[:-1]])
-        self.radau = radau_iia_points(degree)
-        support = np.concatenate([[0.0], self.radau])
-        collocation_matrix = lagrange_basis_derivatives(support, self.radau)
-        self.curve_points = np.linspace(0.0, 1.0, _CURVE_SAMPLES + 1)[1:]
-        self.curve_basis = lagrange_basis_values(support, self.curve_points)
-
-        self.n_states = intervals * degree
+        self._build_mesh()
         decision = ca.SX.sym("w", 2 + 2 * intervals + 6 * self.n_states)
         self.decision = decision
         time_scaled, slack = decision[0], decision[1]
@@ -57,27 +49,15 @@ class VerifiedTranscription(Transcription):
         states = ca.reshape(decision[2 + 2 * intervals :], 6, self.n_states)
         landing_time = time_scaled * _TIME_SCALE
 
-        state_scale = ca.DM(self.state_scale)
-        control_scale = ca.DM(self.control_scale)
-        physical_states = states * ca.repmat(state_scale, 1, self.n_states)
-        physical_controls = controls * ca.repmat(control_scale, 1, intervals)
+        physical_states = states * ca.repmat(ca.DM(self.state_scale), 1, self.n_states)
+        physical_controls = controls * ca.repmat(ca.DM(self.control_scale), 1, intervals)
         control_at_point = ca.repmat(physical_controls, degree, 1)
         control_at_point = ca.reshape(control_at_point, 2, self.n_states)
-        derivatives = self.dynamics.map(self.n_states)(physical_states, control_at_point)
-
-        residuals = []
-        previous_end = self.initial_state
-        for k in range(intervals):
-            columns = [previous_end] + [physical_states[:, k * degree + i] for i in range(degree)]
-            step = landing_time * float(self.fractions[k])
-            for i in range(degree):
-                slope = sum(float(collocation_matrix[i, j]) * columns[j] for j in range(degree + 1))
-                residuals.append((slope - step * derivatives[:, k * degree + i]) / state_scale)
-            previous_end = columns[-1]
+        residuals = self.collocation_residuals(physical_states, control_at_point, landing_time)
         terminal_scaled = states[:, -1]
 
         self.objective = slack + settings.smoothness_weight * self.smoothness(controls)
-        self.constraints = ca.vertcat(*residuals, self.epigraph(slack, terminal_scaled))
+        self.constraints = ca.vertcat(residuals, self.epigraph(slack, terminal_scaled))
         n_equalities = 6 * self.n_states
         self.lbg = np.concatenate([np.zeros(n_equalities), np.full(6, -np.inf)])
         self.ubg = np.zeros(n_equalities + 6)
@@ -86,6 +66,34 @@ class VerifiedTranscription(Transcription):
         control_low, control_high = self.scaled_control_bounds(intervals)
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
         self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
+
+    def _build_mesh(self) -> None:
+        """The geometric interval mesh, the Radau IIA points and the matrices on them."""
+        settings = self.settings
+        self.fractions = interval_fractions(settings.intervals, settings.final_interval_ratio)
+        self.interval_starts = np.concatenate([[0.0], np.cumsum(self.fractions)[:-1]])
+        self.radau = radau_iia_points(settings.degree)
+        support = np.concatenate([[0.0], self.radau])
+        self.collocation_matrix = lagrange_basis_derivatives(support, self.radau)
+        self.curve_points = np.linspace(0.0, 1.0, _CURVE_SAMPLES + 1)[1:]
+        self.curve_basis = lagrange_basis_values(support, self.curve_points)
+        self.n_states = settings.intervals * settings.degree
+
+    def collocation_residuals(self, physical_states, control_at_point, landing_time) -> ca.SX:
+        """The scaled collocation equations (6 per point) for the states and the controls at the points."""
+        degree = self.settings.degree
+        state_scale = ca.DM(self.state_scale)
+        derivatives = self.dynamics.map(self.n_states)(physical_states, control_at_point)
+        residuals = []
+        previous_end = self.initial_state
+        for k in range(self.settings.intervals):
+            columns = [previous_end] + [physical_states[:, k * degree + i] for i in range(degree)]
+            step = landing_time * float(self.fractions[k])
+            for i in range(degree):
+                slope = sum(float(self.collocation_matrix[i, j]) * columns[j] for j in range(degree + 1))
+                residuals.append((slope - step * derivatives[:, k * degree + i]) / state_scale)
+            previous_end = columns[-1]
+        return ca.vertcat(*residuals)
 
     def _point_fractions(self) -> np.ndarray:
         """Times of the collocation points as fractions of T (excluding 0)."""
@@ -109,11 +117,23 @@ class VerifiedTranscription(Transcription):
         landing_time = float(solution[0]) * _TIME_SCALE
         controls = solution[2 : 2 + 2 * intervals].reshape(2, intervals, order="F") * self.control_scale[:, None]
         states = solution[2 + 2 * intervals :].reshape(6, self.n_states, order="F") * self.state_scale[:, None]
-        node_times = np.concatenate([[0.0], self._point_fractions() * landing_time])
-        node_states = np.column_stack([np.asarray(initial_state, dtype=float), states])
         control_times = np.concatenate([self.interval_starts, [1.0]]) * landing_time
+        return self.decoded_plan(landing_time, initial_state, states, control_times, controls, "zero_order_hold")
+
+    def decoded_plan(
+        self,
+        landing_time: float,
+        initial_state: np.ndarray,
+        states: np.ndarray,
+        control_times: np.ndarray,
+        controls: np.ndarray,
+        interpolation: str,
+    ) -> DecodedPlan:
+        """A :class:`DecodedPlan` from physical states at the points and a control function."""
+        intervals, degree = self.settings.intervals, self.settings.degree
+        node_times = np.concatenate([[0.0], self._point_fractions() * landing_time])
+        node_states = np.column_stack([np.asarray(initial_state, dtype=float)[:6], states])
         # Each interval's polynomial runs through its start (the previous interval's end) and its d points.
-        degree = self.settings.degree
         starts = node_states[:, 0 : self.n_states : degree]
         blocks = np.concatenate([starts[:, :, None], states.reshape(6, intervals, degree)], axis=2)
         curve_states = np.einsum("sj,ikj->iks", self.curve_basis, blocks).reshape(6, -1)
@@ -126,7 +146,7 @@ class VerifiedTranscription(Transcription):
             node_states,
             control_times,
             controls,
-            "zero_order_hold",
+            interpolation,
             np.concatenate([[0.0], curve_times]),
             np.column_stack([node_states[:, 0], curve_states]),
         )

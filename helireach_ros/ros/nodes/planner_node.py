@@ -162,6 +162,13 @@ class LandingPlannerNode(Node):
         # Not the deadline itself by default: a slow solve is not a hung one, and its plan must still replace the
         # deadline's fallback (a dead worker is seen at once whatever the timeout).
         self._solve_timeout = max(self._deadline, _MIN_SOLVE_TIMEOUT_S) if math.isnan(solve_timeout) else solve_timeout
+        reaction_delay = declare(
+            "reaction_delay",
+            math.nan,
+            "s the controls stay at the pre-failure trim before a failure plan starts (NaN = the planner settings')",
+            (0.0, 10.0),
+        )
+        self._reaction_delay = reaction_delay  # NaN until the settings are loaded
         live_rate = declare("live_rate", 5.0, "live evaluations before a failure, Hz (0 = off)", (0.0, 100.0))
         live_power_fraction = declare(
             "live_power_fraction", 0.0, "engine power left after the assumed failure, of the measured power", (0.0, 1.0)
@@ -269,6 +276,8 @@ class LandingPlannerNode(Node):
         # (one made for other conditions is refused: cold starts, autorotation-entry fallback).
         self.airframe = load_aircraft()
         self.settings = load_settings(settings_file or None)
+        if math.isnan(self._reaction_delay):
+            self._reaction_delay = self.settings.reaction_delay_s
         self.envelope, self._envelope_note = self._load_envelope(envelope_file)
         self.warm_up_ms = math.nan
         if solver_workers > 0:
@@ -488,7 +497,9 @@ class LandingPlannerNode(Node):
             if self._pool is not None:
                 timeout_s = _LIVE_TIMEOUT_FACTOR * self._solve_timeout
                 try:
-                    job = self._pool.submit(failure_now, warm_start, PRIORITY_LIVE, timeout_s, cold_check=True)
+                    job = self._pool.submit(
+                        failure_now, warm_start, PRIORITY_LIVE, timeout_s, True, None, self._reaction_delay
+                    )
                 except RuntimeError:  # the pool is closed: the node is being destroyed
                     return
                 self._live_job = job
@@ -501,7 +512,8 @@ class LandingPlannerNode(Node):
         """Without a pool: the live solve on the solver thread (cold check as in the workers)."""
         future: Future = Future()
         try:
-            future.set_result(solve_with_cold_check(self.planner.plan, state, warm_start))
+            solve = partial(self.planner.plan, reaction_delay_s=self._reaction_delay)
+            future.set_result(solve_with_cold_check(solve, state, warm_start))
         except (ValueError, RuntimeError) as error:
             future.set_exception(error)
         done(future)
@@ -622,12 +634,21 @@ class LandingPlannerNode(Node):
             return
         self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False)
 
-    def _solve(self, state: np.ndarray, warm_start: Any) -> tuple[Any | None, str]:
-        """A failure plan or re-plan (blocking; on the solver thread): (plan, "") or (None, why not)."""
+    def _solve(
+        self, state: np.ndarray, warm_start: Any, initial_control: Any = None, reaction_delay_s: float | None = None
+    ) -> tuple[Any | None, str]:
+        """A failure plan or re-plan (blocking; on the solver thread): (plan, "") or (None, why not).
+
+        ``initial_control``/``reaction_delay_s``: None for a failure plan (trim before the failure, the node's
+        reaction delay); a re-plan passes the control being flown and 0.
+        """
+        delay = self._reaction_delay if reaction_delay_s is None else reaction_delay_s
         try:
             if self._pool is None:
-                return self.planner.plan(state, warm_start), ""
-            future = self._pool.submit(state, warm_start, PRIORITY_FAILURE, self._solve_timeout)
+                return self.planner.plan(state, warm_start, initial_control, delay), ""
+            future = self._pool.submit(
+                state, warm_start, PRIORITY_FAILURE, self._solve_timeout, False, initial_control, delay
+            )
             try:
                 # The pool fails the job solve_timeout after a worker took it; the extra wait covers the queue.
                 return future.result(timeout=self._solve_timeout + _QUEUE_WAIT_S), ""
@@ -684,7 +705,9 @@ class LandingPlannerNode(Node):
                 f"({failure.replans} re-plans, {failure.replans_failed} failed)"
             )
             return
-        plan, error = self._solve(state, previous.plan.warm_start)
+        # from the control being flown at the state's stamp (the flyable controls stay continuous), no delay
+        flying = previous.plan.controls_at([(stamp_ns - previous.stamp_ns) * 1e-9])[:, 0]
+        plan, error = self._solve(state, previous.plan.warm_start, flying, 0.0)
         if plan is None or not plan.solver.success:
             failure.replans_failed += 1
             reason = error or f"solver {plan.solver.status}"

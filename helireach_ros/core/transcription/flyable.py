@@ -1,0 +1,140 @@
+"""The default ("flyable") transcription: the verified mesh with controls a helicopter can fly.
+
+The verified scheme's plans are optimal to the knife edge of a point-mass model: pitch steps of 18°
+between intervals, 40° nose up at touchdown, the collective from zero to its maximum in one step, paths
+that pass millimetres above the ground at 100 kt and zoom back up. This scheme keeps the verified
+scheme's free final time and geometric Radau mesh (:mod:`~helireach_ros.core.transcription.verified`)
+and changes what a plan may be:
+
+* **Continuous controls.** u = (C_T, θ) is piecewise linear (first-order hold) between the K + 1
+  interval breakpoints; u₀ is the NLP parameter's control (what is flown at the plan's start: the
+  pre-failure trim, or the current plan's control when re-planning), so a plan never jumps.
+  The replay integrates exactly this function.
+* **Rate limits.** Per interval, :math:`|u_{k+1} - u_k| \\le \\dot u_{max} h_k` with h_k = T · f_k
+  (linear in the decision): |dC_T/dt| ≤ C_T,max / t_travel, |dθ/dt| ≤ θ̇_max. With a linear
+  control this bounds the rate everywhere, not only at the nodes.
+* **Attitude limits.** −θ_up ≤ θ ≤ θ_down along the path (the flare attitude limit instead of the
+  paper's ±40°), and the touchdown window −θ_td,up ≤ θ(T) ≤ θ_td,down, tightened by
+  :data:`TOUCHDOWN_ATTITUDE_MARGIN` (the replay's contact may come slightly before T, where θ is still
+  rotating out of the flare; the replay checks the true window at contact). The control is linear between
+  breakpoints, so bounds at the breakpoints hold everywhere.
+* **On the ground.** h(T) = 0 exactly (the paper accepts |h| ≤ 1 ft), so the touchdown limits are met
+  at contact, with the rotor within its limits until then.
+* **No ground skims.** Below the commit height h_c the path may not climb:
+  :math:`y_i + M\\,s(h_i - h_c) \\ge 0` at every collocation point, with s the smooth positive part
+  (:func:`~helireach_ros.core.model.smooth_positive`, width 5 cm) and M = 10 s⁻¹: below h_c the descent
+  rate is non-negative (to within M·s, < 1.3 cm/s half a metre below h_c); above it, climbing is
+  allowed. A skim that dips below h_c and climbs away is infeasible; the replay checks the rule on the
+  integrated path.
+* **Touchdown rotor limit.** Below h_c (the final flare and cushion) Ω may droop to
+  ``touchdown_min_rotor_speed_ratio`` × Ω₀; above it the in-flight limit holds (both with the rotor
+  back-off; a smooth step in h that reaches the in-flight limit at h_c).
+
+The limits are the airframe's :class:`~helireach_ros.core.airframe.FlyabilityLimits`.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from helireach_ros.core.model import smooth_positive
+from helireach_ros.core.transcription.base import DecodedPlan
+from helireach_ros.core.transcription.verified import _TIME_SCALE, VerifiedTranscription
+
+__all__ = ["COMMIT_GAIN", "COMMIT_SMOOTHING", "TOUCHDOWN_ATTITUDE_MARGIN", "FlyableTranscription"]
+
+COMMIT_GAIN = 10.0  # 1/s: M in y + M s(h − h_c) ≥ 0; climbing allowed at M m/s per metre above h_c
+COMMIT_SMOOTHING = 0.05  # m: width of the smooth positive part
+TOUCHDOWN_ATTITUDE_MARGIN = np.radians(0.5)  # rad the NLP keeps θ(T) inside the touchdown window
+_ROTOR_STEP_WIDTH = 0.1  # m: width of the step from the in-flight to the touchdown rotor-speed limit
+
+
+class FlyableTranscription(VerifiedTranscription):
+    """Free-final-time Radau collocation with rate-limited continuous controls (see the module docstring)."""
+
+    def _build(self) -> None:
+        settings, airframe = self.settings, self.airframe
+        flyability = airframe.flyability
+        intervals = settings.intervals
+        self._build_mesh()
+        # u_0 is the parameter's; the decision holds u_1 … u_K
+        self.control_lower = np.array([0.0, -flyability.max_nose_up_pitch])
+        self.control_upper = np.array([airframe.max_thrust_coefficient, flyability.max_nose_down_pitch])
+        decision = ca.SX.sym("w", 2 + 2 * intervals + 6 * self.n_states)
+        self.decision = decision
+        time_scaled, slack = decision[0], decision[1]
+        control_scale = ca.DM(self.control_scale)
+        decided = ca.reshape(decision[2 : 2 + 2 * intervals], 2, intervals)
+        states = ca.reshape(decision[2 + 2 * intervals :], 6, self.n_states)
+        landing_time = time_scaled * _TIME_SCALE
+
+        physical_states = states * ca.repmat(ca.DM(self.state_scale), 1, self.n_states)
+        breakpoints = ca.horzcat(self.initial_control, decided * ca.repmat(control_scale, 1, intervals))
+        control_at_point = ca.horzcat(
+            *[
+                breakpoints[:, k] + float(tau) * (breakpoints[:, k + 1] - breakpoints[:, k])
+                for k in range(intervals)
+                for tau in self.radau
+            ]
+        )
+        residuals = self.collocation_residuals(physical_states, control_at_point, landing_time)
+
+        rates = ca.DM([airframe.max_thrust_coefficient_rate, flyability.max_pitch_rate])
+        rate_rows = []
+        for k in range(intervals):
+            change = (breakpoints[:, k + 1] - breakpoints[:, k]) / control_scale
+            allowed = rates * landing_time * float(self.fractions[k]) / control_scale
+            rate_rows += [change - allowed, -change - allowed]
+        heights, descent_rates = physical_states[3, :], physical_states[0, :]
+        commit = (
+            descent_rates + COMMIT_GAIN * smooth_positive(heights - flyability.commit_height, COMMIT_SMOOTHING)
+        ) / self.state_scale[0]
+        # Ω ≥ the in-flight limit above the commit height, ≥ the touchdown limit below it (smooth step, fully the
+        # in-flight limit from h_c on: 0.5 (1 + tanh 3) = 0.9975 of it, inside the rotor back-off)
+        omega0 = airframe.nominal_rotor_speed
+        flight_low = airframe.limits.min_rotor_speed_ratio + settings.rotor_speed_backoff
+        touchdown_low = flyability.touchdown_min_rotor_speed_ratio + settings.rotor_speed_backoff
+        step = 0.5 * (1.0 + ca.tanh((heights - flyability.commit_height + 3.0 * _ROTOR_STEP_WIDTH) / _ROTOR_STEP_WIDTH))
+        rotor_margin = physical_states[2, :] / omega0 - touchdown_low - (flight_low - touchdown_low) * step
+        terminal_scaled = states[:, -1]
+
+        scaled_controls = breakpoints / ca.repmat(control_scale, 1, intervals + 1)
+        self.objective = slack + settings.smoothness_weight * self.smoothness(scaled_controls)
+        self.constraints = ca.vertcat(
+            residuals,
+            self.epigraph(slack, terminal_scaled),
+            *rate_rows,
+            ca.reshape(commit, -1, 1),
+            ca.reshape(rotor_margin, -1, 1),
+        )
+        n_equalities = 6 * self.n_states
+        n_rates = 4 * intervals
+        self.lbg = np.concatenate(
+            [np.zeros(n_equalities), np.full(6 + n_rates, -np.inf), np.zeros(2 * self.n_states)]
+        )
+        self.ubg = np.concatenate([np.zeros(n_equalities + 6 + n_rates), np.full(2 * self.n_states, np.inf)])
+
+        self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit is the constraint above
+        state_low, state_high = self.scaled_state_bounds(self.n_states)
+        state_low[-3] = state_high[-3] = 0.0  # h(T) = 0: the plan ends on the ground
+        control_low, control_high = self.scaled_control_bounds(intervals)
+        # θ(T) inside the window by a margin: the replay's contact can come a little before T, where θ is on
+        # its way from the flare attitude (at 20 deg/s, 0.5 deg is 25 ms of margin).
+        margin = TOUCHDOWN_ATTITUDE_MARGIN
+        control_low[-1] = (margin - flyability.touchdown_max_nose_up_pitch) / self.control_scale[1]
+        control_high[-1] = (flyability.touchdown_max_nose_down_pitch - margin) / self.control_scale[1]
+        self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
+        self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
+
+    def initial_guess(self, initial_state: np.ndarray) -> np.ndarray:
+        return np.clip(super().initial_guess(initial_state), self.lbx, self.ubx)
+
+    def decode(self, solution: np.ndarray, initial_state: np.ndarray) -> DecodedPlan:
+        intervals = self.settings.intervals
+        landing_time = float(solution[0]) * _TIME_SCALE
+        decided = solution[2 : 2 + 2 * intervals].reshape(2, intervals, order="F") * self.control_scale[:, None]
+        controls = np.column_stack([np.asarray(initial_state, dtype=float)[6:8], decided])
+        states = solution[2 + 2 * intervals :].reshape(6, self.n_states, order="F") * self.state_scale[:, None]
+        control_times = np.concatenate([self.interval_starts, [1.0]]) * landing_time
+        return self.decoded_plan(landing_time, initial_state, states, control_times, controls, "linear")
