@@ -1,6 +1,6 @@
 """How often does each transcription call a state safe that its own replay does not land?
 
-Run: .venv/bin/python bench/replay_failures.py [--heights 17] [--speeds 13]
+Run: .venv/bin/python bench/replay_failures.py [--heights 17] [--speeds 13] [--only flyable]
 
 Over a grid of failure states (0–800 ft × 0–120 kt, total power loss, uh60a_class), each variant
 solves every state cold. For each variant it prints: cells whose NLP value is ≤ 0 ("NLP-safe"),
@@ -26,17 +26,22 @@ VARIANTS = {
     "paper N=24 c=3 (paper)": PlannerSettings(method="paper", paper_points=24, paper_time_scale=3.0),
     "paper N=24 c=6": PlannerSettings(method="paper", paper_points=24, paper_time_scale=6.0),
     "paper N=60 c=6": PlannerSettings(method="paper", paper_points=60, paper_time_scale=6.0),
-    "verified K=20 d=3 (default)": PlannerSettings(),
-    "verified K=40 d=3": PlannerSettings(intervals=40),
-    "verified K=80 d=3 (reference)": PlannerSettings(intervals=80),
+    "verified K=20 d=3": PlannerSettings(method="verified"),
+    "verified K=40 d=3": PlannerSettings(method="verified", intervals=40),
+    "verified K=80 d=3 (reference)": PlannerSettings(method="verified", intervals=80),
+    "flyable K=20 d=3 (default)": PlannerSettings(),
+    "flyable K=40 d=3": PlannerSettings(intervals=40),
+    "flyable + 0.5 s delay": PlannerSettings(reaction_delay_s=0.5),
+    "flyable + 1 s delay": PlannerSettings(reaction_delay_s=1.0),
 }
-REFERENCE = "verified K=80 d=3 (reference)"
+REFERENCE = "verified K=80 d=3 (reference)"  # the paper's problem, finely resolved; flyable plans solve another one
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--heights", type=int, default=17)
     parser.add_argument("--speeds", type=int, default=13)
+    parser.add_argument("--only", default="", help="run only variants whose name contains this (plus the reference)")
     arguments = parser.parse_args()
     airframe = load_airframe("uh60a_class")
     heights_ft = np.linspace(0.0, 800.0, arguments.heights)
@@ -44,6 +49,8 @@ def main() -> None:
     cells = [(h, v) for h in heights_ft for v in speeds_kt]
     results: dict[str, list] = {}
     for name, settings in VARIANTS.items():
+        if arguments.only not in name and name != REFERENCE:
+            continue
         planner = get_planner(airframe, settings)
         started = time.perf_counter()
         plans = [planner.plan(initial_state_after_failure(airframe, h * FT, v * KT)) for h, v in cells]
@@ -70,7 +77,10 @@ def main() -> None:
             f"{optimistic:19d} {np.median(times):9.1f} {np.percentile(times, 95):7.1f} {total_s:7.1f}"
         )
     print("\n'safe but ref unsafe' counts cells a variant would call safe (paper: by its NLP value, as the paper does;")
-    print("verified: after its replay check) that the reference calls unsafe or unverified.")
+    print("verified and flyable: after its replay check) that the reference calls unsafe or unverified. The reference")
+    print("solves the paper's problem; the flyable rows solve another (attitude, rate and touchdown limits, but a")
+    print("touchdown rotor limit of 80 %), so their count is a difference of problems, not optimism: each flyable")
+    print("'safe' passed its own replay, judged at ground contact against every flyability limit.")
     print(f"load average after (1/5/15 min): {loadavg_text()}")
 
 

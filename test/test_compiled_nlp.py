@@ -18,7 +18,7 @@ from helireach_ros.core.planner import LandingPlanner
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.units import FT, KT
 
-TINY = PlannerSettings(intervals=2, degree=2)
+TINY = PlannerSettings(intervals=6, degree=2)  # flyable, coarse: fast to compile (2-4 intervals are infeasible)
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,7 @@ def uh60():
 
 def _nlp(planner: LandingPlanner) -> dict:
     transcription = planner.transcription
-    return {"x": transcription.decision, "p": transcription.initial_state, "f": transcription.objective,
+    return {"x": transcription.decision, "p": transcription.parameters, "f": transcription.objective,
             "g": transcription.constraints}  # fmt: skip
 
 

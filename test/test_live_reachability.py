@@ -77,12 +77,12 @@ def test_live_verdicts_equal_helireach_plan_at_the_same_state(airframe, settings
 
 
 def test_a_state_the_level_trim_envelope_calls_safe_can_be_unsafe_in_a_descent(airframe, settings, planner) -> None:
-    # 20 ft, 90 kt: safe from level trim in the shipped envelope; in a 2,000 ft/min descent it is not.
+    # 200 ft, 100 kt: safe from level trim in the shipped envelope; in a 2,500 ft/min descent it is not.
     envelope = load_envelope(default_envelope_path(), airframe, settings, 0.0)
-    assert envelope.query(20 * FT, 90 * KT).status == "safe"
+    assert envelope.query(200 * FT, 100 * KT).status == "safe"
     clock = Clock()
     verdict = LiveEvaluator(LiveSettings(), planner.plan).evaluate(
-        measured(airframe, 20, 90, -2000), clock.now_ns, clock.now_ns, clock
+        measured(airframe, 200, 100, -2500), clock.now_ns, clock.now_ns, clock
     )
     assert verdict is not None and verdict.status == "unsafe" and not verdict.safe
 
@@ -97,7 +97,7 @@ def test_the_standby_plan_is_the_latest_safe_verdict_if_fresh(airframe, planner)
     assert evaluator.standby(stamp + 400 * MS) is None  # too old for this failure
     assert evaluator.standby(stamp - 10 * MS) is None  # a failure before the state: not its plan
     # A newer verdict that is not safe withdraws the standby, however fresh the old safe one is.
-    unsafe = evaluator.evaluate(measured(airframe, 20, 90, -2000), stamp + 100 * MS, stamp + 100 * MS, clock)
+    unsafe = evaluator.evaluate(measured(airframe, 200, 100, -2500), stamp + 100 * MS, stamp + 100 * MS, clock)
     assert unsafe is not None and not unsafe.safe
     assert evaluator.standby(stamp + 150 * MS) is None
 
@@ -142,16 +142,29 @@ def test_settings_are_validated() -> None:
         LiveSettings(power_fraction=1.5)
 
 
-def test_a_warm_plan_that_fails_its_replay_is_solved_again_cold(airframe, settings, planner) -> None:
-    # Warm-started from 400 ft / 100 kt, the plan at 479 ft / 120 kt (124 ft/min down, rotor 95 %) skims the
-    # ground and fails its replay; the cold plan lands. The live verdict must be the cold one, as `helireach plan`.
-    previous = measured(airframe, 400, 100)
-    state = measured(airframe, 479, 120, -124, 95)
+def test_a_warm_plan_that_is_not_safe_is_solved_again_cold(airframe, settings, planner) -> None:
+    # Warm-started from a 20 ft hover's (unsafe) plan, the solve from 600 ft / 30 kt does not converge; the cold
+    # plan lands. The live verdict must be the cold one, as `helireach plan`. (The verified plans' case, a warm
+    # plan at 479 ft / 120 kt that skimmed the ground, does not occur with the flyable plans: no climbing below
+    # the commit height.)
+    previous = measured(airframe, 20, 0)
+    state = measured(airframe, 600, 30)
     warm = planner.plan(failure_now_state(state, 0.0), planner.plan(failure_now_state(previous, 0.0)).warm_start)
-    assert warm.status == "unverified"  # the case exists (else this test proves nothing)
+    assert not warm.safe  # the case exists (else this test proves nothing)
     clock = Clock()
     evaluator = LiveEvaluator(LiveSettings(), planner.plan)
     evaluator.evaluate(previous, clock.now_ns, clock.now_ns, clock)
     verdict = evaluator.evaluate(state, clock.now_ns, clock.now_ns, clock)
     assert verdict.status == "safe" and verdict.plan.replay.lands_within_limits
     assert verdict.status == plan_landing(failure_now_state(state, 0.0), airframe, settings).status
+
+
+def test_the_previous_live_solution_warm_starts_only_a_neighbouring_state(airframe, planner) -> None:
+    clock = Clock()
+    evaluator = LiveEvaluator(LiveSettings(), planner.plan)
+    assert not evaluator.warm_start_applies(measured(airframe, 500, 75))  # nothing yet
+    evaluator.evaluate(measured(airframe, 500, 75), clock.now_ns, clock.now_ns, clock)
+    assert evaluator.warm_start_applies(measured(airframe, 520, 78))  # 200 ms later in flight
+    assert not evaluator.warm_start_applies(measured(airframe, 20, 75))  # a jump: cold or the envelope's plan
+    _, warm_start = evaluator.prepare(measured(airframe, 20, 75), clock.now_ns, clock.now_ns)
+    assert warm_start is None

@@ -325,9 +325,12 @@ def test_failure_publishes_a_verified_trajectory_path_and_status(context: Contex
         assert fields["warm_start"] == "envelope"
         assert math.isclose(float(fields["time_to_land_s"]), times[-1], rel_tol=1e-6)
         assert math.isclose(float(fields["initial_height_m"]), 500 * FT)
-        # The zero-order hold is encoded exactly: each value is held until just before the next breakpoint.
-        held = np.flatnonzero(np.diff(times) < 1e-5)
-        assert held.size > 0 and np.allclose(values[:, held], values[:, held - 1])
+        # The flyable plan's controls are continuous and rate-limited: one point per breakpoint, no steps.
+        airframe = load_airframe("uh60a_class")
+        slopes = np.abs(np.diff(values, axis=1)) / np.diff(times)
+        assert np.all(np.diff(times) > 1e-3)
+        assert slopes[0].max() <= airframe.max_thrust_coefficient_rate * (1 + 1e-6)
+        assert slopes[1].max() <= airframe.flyability.max_pitch_rate * (1 + 1e-6)
         path = paths[-1]
         assert len(path.poses) > 2 and math.isclose(path.poses[0].pose.position.z, 500 * FT, rel_tol=1e-9)
         assert abs(path.poses[-1].pose.position.z) <= 1.0 * FT

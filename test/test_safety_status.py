@@ -113,8 +113,8 @@ def test_input_problems_make_any_status_an_error() -> None:
 def test_a_descent_the_level_trim_envelope_calls_safe_is_an_error_with_live_and_stale_without(
     airframe, settings, envelope
 ) -> None:
-    # The acceptance case: 20 ft, 90 kt in a 2,000 ft/min descent.
-    height, speed, climb = 20 * FT, 90 * KT, -2000 * FPM
+    # The acceptance case: 200 ft, 100 kt in a 2,500 ft/min descent.
+    height, speed, climb = 200 * FT, 100 * KT, -2500 * FPM
     query = envelope.query(height, speed)
     assert query.status == "safe"
     domain = ValidityDomain.from_metadata(envelope.metadata).check(

@@ -30,10 +30,10 @@ def test_outside_the_envelope_domain_without_a_live_verdict_the_status_is_stale(
         assert rm.status_values(statuses[-1])["evidence"] == "envelope"
         # 20 ft, 90 kt is safe from level trim; in a 2,000 ft/min descent the envelope does not speak for it.
         assert harness.keep_publishing(
-            20 * FT, 90 * KT, climb_rate=-2000 * FPM, until=level_is(statuses, DiagnosticStatus.STALE)
+            200 * FT, 100 * KT, climb_rate=-2500 * FPM, until=level_is(statuses, DiagnosticStatus.STALE)
         )
         message = statuses[-1].message
-        assert "outside the envelope's domain" in message and "climb rate -2000 ft/min" in message
+        assert "outside the envelope's domain" in message and "climb rate -2500 ft/min" in message
         assert "no current live verdict" in message
         # A rotor 5 % slow in level flight: outside the domain too.
         assert harness.keep_publishing(
@@ -64,7 +64,7 @@ def test_with_the_live_planner_a_descent_the_envelope_calls_safe_is_an_error(con
         # 20 ft, 90 kt, 2,000 ft/min down: outside the envelope's domain (it would say safe); the live verdict says
         # no safe landing exists from there.
         assert harness.keep_publishing(
-            20 * FT, 90 * KT, climb_rate=-2000 * FPM, until=level_is(statuses, DiagnosticStatus.ERROR)
+            200 * FT, 100 * KT, climb_rate=-2500 * FPM, until=level_is(statuses, DiagnosticStatus.ERROR)
         ), statuses[-1].message
         values = rm.status_values(statuses[-1])
         assert (

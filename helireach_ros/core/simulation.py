@@ -382,7 +382,9 @@ class SimulatedVehicle:
         scenario: the flight.
         airframe: the nominal airframe (default: ``scenario.airframe`` loaded); the vehicle flies it
             with ``scenario.parameter_mismatch`` applied.
-        settings: planner settings (only the replay tolerance and rotor-speed margin are used).
+        settings: planner settings (the replay tolerance, the rotor-speed margin, and the method: the touchdown judges
+            the rotor by the rule of the plans flown, so ``flyable`` allows the touchdown rotor limit below the
+            commit height).
     """
 
     def __init__(
@@ -406,6 +408,7 @@ class SimulatedVehicle:
         self.touchdown: TouchdownReport | None = None
         self._held_controls = np.array([self.trim.thrust_coefficient, self.trim.pitch_angle])
         self._rotor_range = (math.inf, -math.inf)
+        self._rotor_low_above_commit = math.inf  # flyable plans: the in-flight limit holds above the commit height
         self._in_touchdown_set = False
         self.history: list[tuple[float, np.ndarray]] = [(0.0, self.state.copy())]
 
@@ -497,6 +500,8 @@ class SimulatedVehicle:
         if self._in_touchdown_set:
             return
         self._rotor_range = (min(self._rotor_range[0], float(state[2])), max(self._rotor_range[1], float(state[2])))
+        if state[3] >= self.nominal_airframe.flyability.commit_height:
+            self._rotor_low_above_commit = min(self._rotor_low_above_commit, float(state[2]))
         self._in_touchdown_set = bool(terminal_cost(self.nominal_airframe, state) <= 0.0)
 
     def _finish(self, reason: str) -> None:
@@ -504,8 +509,13 @@ class SimulatedVehicle:
         omega0 = self.nominal_airframe.nominal_rotor_speed
         margin = self.settings.rotor_speed_replay_margin * omega0
         low, high = self._rotor_range
+        # flyable plans (the replay's rule): below the commit height the rotor may droop to the touchdown limit
+        flyability = self.airframe.flyability
+        flyable = self.settings.method == "flyable"
+        low_limit = flyability.touchdown_min_rotor_speed_ratio if flyable else limits.min_rotor_speed_ratio
         rotor_ok = bool(
-            low >= limits.min_rotor_speed_ratio * omega0 - margin
+            low >= low_limit * omega0 - margin
+            and self._rotor_low_above_commit >= limits.min_rotor_speed_ratio * omega0 - margin
             and high <= limits.max_rotor_speed_ratio * omega0 + margin
         )
         value = float(terminal_cost(self.nominal_airframe, self.state)) if not reason else math.inf

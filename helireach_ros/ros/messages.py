@@ -470,6 +470,22 @@ def plan_status_values(plan: Any) -> dict[str, Any]:
         "predicted_touchdown_descent_rate_m_s": touchdown[0],
         "predicted_touchdown_forward_speed_m_s": touchdown[1],
         "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
+        "method": plan.method,
+        "reaction_delay_s": plan.reaction_delay_s,
+        **flyability_values(plan.replay.flyability),
+    }
+
+
+def flyability_values(report: Any) -> dict[str, Any]:
+    """The ``/helireach/plan_status`` values of the replay's flyability check (see msg_docs): what the plan asks of
+    the aircraft (SI) and the limits it breaks ("" = none)."""
+    return {
+        "flyable": report.within_limits,
+        "flyability_violations": "; ".join(report.violations),
+        "max_pitch_rate_rad_s": report.max_pitch_rate,
+        "max_collective_rate_per_s": report.max_collective_rate,
+        "max_nose_up_pitch_rad": report.max_nose_up_pitch,
+        "touchdown_pitch_rad": math.nan if report.touchdown_pitch is None else report.touchdown_pitch,
     }
 
 

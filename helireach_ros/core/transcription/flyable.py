@@ -11,8 +11,9 @@ and changes what a plan may be:
   pre-failure trim, or the current plan's control when re-planning), so a plan never jumps.
   The replay integrates exactly this function.
 * **Rate limits.** Per interval, :math:`|u_{k+1} - u_k| \\le \\dot u_{max} h_k` with h_k = T · f_k
-  (linear in the decision): |dC_T/dt| ≤ C_T,max / t_travel, |dθ/dt| ≤ θ̇_max. With a linear
-  control this bounds the rate everywhere, not only at the nodes.
+  (linear in the decision): |dC_T/dt| ≤ C_T,max / t_travel, |dθ/dt| ≤ θ̇_max, each backed off by
+  :data:`RATE_BACKOFF` (IPOPT meets constraints only to its violation tolerance; the replay checks the true
+  limits). With a linear control this bounds the rate everywhere, not only at the nodes.
 * **Attitude limits.** −θ_up ≤ θ ≤ θ_down along the path (the flare attitude limit instead of the
   paper's ±40°), and the touchdown window −θ_td,up ≤ θ(T) ≤ θ_td,down, tightened by
   :data:`TOUCHDOWN_ATTITUDE_MARGIN` (the replay's contact may come slightly before T, where θ is still
@@ -27,8 +28,10 @@ and changes what a plan may be:
   allowed. A skim that dips below h_c and climbs away is infeasible; the replay checks the rule on the
   integrated path.
 * **Touchdown rotor limit.** Below h_c (the final flare and cushion) Ω may droop to
-  ``touchdown_min_rotor_speed_ratio`` × Ω₀; above it the in-flight limit holds (both with the rotor
-  back-off; a smooth step in h that reaches the in-flight limit at h_c).
+  ``touchdown_min_rotor_speed_ratio`` × Ω₀; above it the in-flight limit holds (a smooth step in h that
+  reaches the in-flight limit at h_c). Both carry the rotor back-off, which grows from 0 at the plan's
+  start to all of it after 1 s: a re-plan from a rotor near its limit (the collective cannot drop at
+  once) may still keep it above the limit; a rotor below the limit has no plan.
 
 The limits are the airframe's :class:`~helireach_ros.core.airframe.FlyabilityLimits`.
 """
@@ -42,11 +45,13 @@ from helireach_ros.core.model import smooth_positive
 from helireach_ros.core.transcription.base import DecodedPlan
 from helireach_ros.core.transcription.verified import _TIME_SCALE, VerifiedTranscription
 
-__all__ = ["COMMIT_GAIN", "COMMIT_SMOOTHING", "TOUCHDOWN_ATTITUDE_MARGIN", "FlyableTranscription"]
+__all__ = ["COMMIT_GAIN", "COMMIT_SMOOTHING", "RATE_BACKOFF", "TOUCHDOWN_ATTITUDE_MARGIN", "FlyableTranscription"]
 
 COMMIT_GAIN = 10.0  # 1/s: M in y + M s(h − h_c) ≥ 0; climbing allowed at M m/s per metre above h_c
 COMMIT_SMOOTHING = 0.05  # m: width of the smooth positive part
 TOUCHDOWN_ATTITUDE_MARGIN = np.radians(0.5)  # rad the NLP keeps θ(T) inside the touchdown window
+RATE_BACKOFF = 0.01  # the NLP plans at 99 % of the rate limits: IPOPT meets constraints to 1e-4, the replay to 1e-6
+_BACKOFF_RAMP_S = 1.0  # s over which the rotor back-off grows from 0 to all of it
 _ROTOR_STEP_WIDTH = 0.1  # m: width of the step from the in-flight to the touchdown rotor-speed limit
 
 
@@ -80,7 +85,7 @@ class FlyableTranscription(VerifiedTranscription):
         )
         residuals = self.collocation_residuals(physical_states, control_at_point, landing_time)
 
-        rates = ca.DM([airframe.max_thrust_coefficient_rate, flyability.max_pitch_rate])
+        rates = (1.0 - RATE_BACKOFF) * ca.DM([airframe.max_thrust_coefficient_rate, flyability.max_pitch_rate])
         rate_rows = []
         for k in range(intervals):
             change = (breakpoints[:, k + 1] - breakpoints[:, k]) / control_scale
@@ -93,10 +98,17 @@ class FlyableTranscription(VerifiedTranscription):
         # Ω ≥ the in-flight limit above the commit height, ≥ the touchdown limit below it (smooth step, fully the
         # in-flight limit from h_c on: 0.5 (1 + tanh 3) = 0.9975 of it, inside the rotor back-off)
         omega0 = airframe.nominal_rotor_speed
-        flight_low = airframe.limits.min_rotor_speed_ratio + settings.rotor_speed_backoff
-        touchdown_low = flyability.touchdown_min_rotor_speed_ratio + settings.rotor_speed_backoff
+        flight_low = airframe.limits.min_rotor_speed_ratio
+        touchdown_low = flyability.touchdown_min_rotor_speed_ratio
         step = 0.5 * (1.0 + ca.tanh((heights - flyability.commit_height + 3.0 * _ROTOR_STEP_WIDTH) / _ROTOR_STEP_WIDTH))
-        rotor_margin = physical_states[2, :] / omega0 - touchdown_low - (flight_low - touchdown_low) * step
+        # The back-off (room for the path's overshoot between nodes, where the flare swings Ω) grows from 0 at the
+        # plan's start to all of it after _BACKOFF_RAMP_S: a re-plan from a rotor near its limit (the collective
+        # cannot drop at once) may still keep it above the limit; below the limit there is no plan.
+        point_times = landing_time * ca.DM(self._point_fractions()).T
+        backoff_now = settings.rotor_speed_backoff * ca.fmin(point_times / _BACKOFF_RAMP_S, 1.0)
+        rotor_margin = (
+            physical_states[2, :] / omega0 - touchdown_low - backoff_now - (flight_low - touchdown_low) * step
+        )
         terminal_scaled = states[:, -1]
 
         scaled_controls = breakpoints / ca.repmat(control_scale, 1, intervals + 1)
@@ -115,7 +127,7 @@ class FlyableTranscription(VerifiedTranscription):
         )
         self.ubg = np.concatenate([np.zeros(n_equalities + 6 + n_rates), np.full(2 * self.n_states, np.inf)])
 
-        self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit is the constraint above
+        self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit (and back-off) is the constraint
         state_low, state_high = self.scaled_state_bounds(self.n_states)
         state_low[-3] = state_high[-3] = 0.0  # h(T) = 0: the plan ends on the ground
         control_low, control_high = self.scaled_control_bounds(intervals)

@@ -486,7 +486,7 @@ class LandingPlannerNode(Node):
             if not self._live.due(now_ns + self._live.settings.period_ns // 2):
                 return
             # The envelope's nearest plan (~1 ms to find) only when there is no previous live solution to start from.
-            needs_fallback = self.envelope is not None and not self._live.has_warm_start
+            needs_fallback = self.envelope is not None and not self._live.warm_start_applies(state)
             stored = self.envelope.nearest_plan(state[3], state[1]) if needs_fallback else None
             prepared = self._live.prepare(state, stamp_ns, now_ns, stored.warm_start if stored is not None else None)
             if prepared is None:
