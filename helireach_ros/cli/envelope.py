@@ -5,8 +5,12 @@ Examples::
     helireach envelope compute --airframe uh60a_class --speeds-kt 0:120:25 --heights-ft 0:800:41 --out hv.npz
     helireach envelope compute --weights-lb 14000,16000 --density-altitude-ft 0,4000 --scheduler tcp://host:8786 \\
         --out sweep/            # one file per combination in the folder
+    helireach envelope compute --climb-rates-fpm=-2000,-1000,0,1500 --dask-local 2 --out hv3d.npz   # 3-D
+    helireach envelope compute --method paper --reaction-delay-s 0 --out paper.npz
     helireach envelope query hv.npz --height-ft 200 --speed-kt 20 --json
     helireach envelope plot hv.npz --out hv.png
+    helireach envelope plot hv3d.npz --climb-rate-fpm -1000 --out slice.png    # or --all-slices
+    helireach envelope plot paper.npz hv.npz --out overlay.png                # boundaries of several files
 
 Heavy imports (CasADi, Dask, matplotlib) stay inside the handlers so ``helireach --help`` is fast.
 """
@@ -15,9 +19,12 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shlex
 import sys
 from pathlib import Path
+
+from helireach_ros.core.settings import METHODS
 
 __all__ = ["register"]
 
@@ -46,11 +53,26 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     compute.add_argument(
         "--power-fraction", type=float, default=0.0, help="engine power left, fraction of trim (default: 0)"
     )
+    compute.add_argument(
+        "--climb-rates-fpm",
+        default=None,
+        help="comma-separated climb rates, ft/min, positive up (e.g. -2000,-1000,0,1500; write --climb-rates-fpm=-2000,"
+        "... when the list starts with a minus): a 3-D envelope with one slice per rate (default: 2-D, level trim)",
+    )
+    compute.add_argument(
+        "--method", choices=METHODS, default=None, help="override the settings file's transcription method"
+    )
+    compute.add_argument(
+        "--reaction-delay-s", type=float, default=None, help="override the settings file's reaction delay, s"
+    )
     compute.add_argument("--weights-lb", default=None, help="comma-separated gross weights, lbf (sweep)")
     compute.add_argument("--density-altitude-ft", default=None, help="comma-separated density altitudes, ft (sweep)")
     where = compute.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None, help="local worker processes (default: every core)")
     where.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    where.add_argument(
+        "--dask-local", type=int, default=None, metavar="N", help="run on a Dask LocalCluster of N worker processes"
+    )
     compute.add_argument("--out", required=True, help="output .npz (a folder for a sweep of several combinations)")
     compute.add_argument("--resume", action="store_true", help="continue the partial file(s) at --out")
     compute.add_argument("--quiet", action="store_true", help="no progress output")
@@ -66,14 +88,27 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     query.add_argument("file", help="envelope .npz")
     query.add_argument("--height-ft", type=float, required=True)
     query.add_argument("--speed-kt", type=float, required=True)
+    query.add_argument("--climb-rate-fpm", type=float, default=0.0, help="ft/min, positive up (default: 0, level)")
     query.add_argument("--airframe", default=None, help="refuse the file unless it is for this airframe")
     query.add_argument("--json", action="store_true", help="print JSON (status, value, margin, ...)")
     query.set_defaults(handler=_query)
 
-    plot = commands.add_parser("plot", help="the flight-manual H-V diagram as an image")
-    plot.add_argument("file", help="envelope .npz")
+    plot = commands.add_parser(
+        "plot",
+        help="the flight-manual H-V diagram as an image; several files: their boundaries overlaid",
+        description="One file: its H-V diagram (a 3-D file: the slice nearest --climb-rate-fpm, or every slice with "
+        "--all-slices). Several files: their boundaries in one figure, each labelled from its metadata.",
+    )
+    plot.add_argument("files", nargs="+", metavar="file", help="envelope .npz (several: overlay)")
     plot.add_argument("--out", required=True, help="image file (.png, .svg, .pdf)")
     plot.add_argument("--title", default=None, help="extra title text")
+    plot.add_argument(
+        "--climb-rate-fpm",
+        type=float,
+        default=None,
+        help="3-D files: draw the slice nearest this climb rate (default 0)",
+    )
+    plot.add_argument("--all-slices", action="store_true", help="3-D file: one panel per climb slice")
     plot.set_defaults(handler=_plot)
 
 
@@ -85,7 +120,7 @@ def _error(message: str) -> int:
 def _compute(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.airframe import ConfigError, load_airframe
     from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelope
-    from helireach_ros.core.envelope.data import EnvelopeError
+    from helireach_ros.core.envelope.data import STATUS_CODES, EnvelopeError
     from helireach_ros.core.envelope.grid import condition_file_name, parse_list, parse_range
     from helireach_ros.core.envelope.progress import Progress
     from helireach_ros.core.envelope.workers import make_executor
@@ -95,6 +130,13 @@ def _compute(arguments: argparse.Namespace) -> int:
     try:
         airframe = load_airframe(arguments.airframe)
         settings = load_settings(arguments.settings)
+        overrides = {
+            name: value
+            for name, value in (("method", arguments.method), ("reaction_delay_s", arguments.reaction_delay_s))
+            if value is not None
+        }
+        settings = settings.replace(**overrides) if overrides else settings
+        climb_rates = _climb_axis(arguments.climb_rates_fpm, FT / 60.0)
         heights = parse_range(arguments.heights_ft, FT, "--heights-ft")
         speeds = parse_range(arguments.speeds_kt, KT, "--speeds-kt")
         weights = parse_list(arguments.weights_lb, "--weights-lb") if arguments.weights_lb else [None]
@@ -111,7 +153,10 @@ def _compute(arguments: argparse.Namespace) -> int:
             for weight in weights
             for altitude in altitudes
         ]
-        jobs = [EnvelopeJob(a, settings, arguments.power_fraction, heights, speeds) for a in airframes]
+        jobs = [
+            EnvelopeJob(a, settings, arguments.power_fraction, heights, speeds, climb_rates=climb_rates)
+            for a in airframes
+        ]
     except (ConfigError, ValueError) as error:
         return _error(str(error))
     out = Path(arguments.out)
@@ -121,8 +166,11 @@ def _compute(arguments: argparse.Namespace) -> int:
         paths = [out / condition_file_name(job.airframe, job.power_fraction) for job in jobs]
     command = "helireach " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["envelope"] else None
     grid_spec = {"heights_ft": arguments.heights_ft, "speeds_kt": arguments.speeds_kt}
+    if climb_rates is not None:
+        grid_spec["climb_rates_fpm"] = arguments.climb_rates_fpm
+    slices = f"{len(climb_rates)} climb rates x " if climb_rates is not None else ""
     try:
-        executor = make_executor(arguments.workers, arguments.scheduler)
+        executor = make_executor(arguments.workers, arguments.scheduler, arguments.dask_local)
     except (ValueError, OSError) as error:
         return _error(f"cannot start the workers: {error}")
     try:
@@ -133,7 +181,8 @@ def _compute(arguments: argparse.Namespace) -> int:
                 progress.message(
                     f"{label}{job.airframe.name}, W = {job.airframe.gross_weight / LBF:.0f} lbf, density altitude "
                     f"{job.airframe.density_altitude / FT:.0f} ft, power fraction {job.power_fraction:g}: "
-                    f"{len(heights)} x {len(speeds)} nodes on {executor.description} -> {path}"
+                    f"{slices}{len(heights)} x {len(speeds)} nodes, method {job.settings.method}, reaction delay "
+                    f"{job.settings.reaction_delay_s:g} s, on {executor.description} -> {path}"
                 )
             if path.exists() and not arguments.resume and _is_partial(path):
                 return _error(f"{path} is a partial envelope; continue it with --resume, or delete it to start over")
@@ -141,7 +190,7 @@ def _compute(arguments: argparse.Namespace) -> int:
                 job, executor, path, resume=arguments.resume and path.exists(), progress=progress,
                 command=command, grid_spec=grid_spec,
             )  # fmt: skip
-            counts = {name: int((envelope.status == name).sum()) for name in ("safe", "unsafe", "unverified", "failed")}
+            counts = {name: int((envelope.status == name).sum()) for name in STATUS_CODES}
             compute = envelope.metadata.get("compute", {})
             print(
                 f"{path}: envelope {envelope.envelope_id}: {counts}, {len(envelope.boundary)} boundary points, "
@@ -159,6 +208,22 @@ def _compute(arguments: argparse.Namespace) -> int:
     return 0
 
 
+def _climb_axis(text: str | None, unit: float) -> tuple[float, ...] | None:
+    """``--climb-rates-fpm``: ascending SI climb rates, None without the flag.
+
+    Raises:
+        ValueError: not numbers, or a rate given twice.
+    """
+    from helireach_ros.core.envelope.grid import parse_list
+
+    if text is None:
+        return None
+    rates = sorted(parse_list(text, "--climb-rates-fpm"))
+    if len(set(rates)) != len(rates):
+        raise ValueError(f"--climb-rates-fpm lists a climb rate twice: {text!r}")
+    return tuple(rate * unit for rate in rates)
+
+
 def _is_partial(path: Path) -> bool:
     from helireach_ros.core.envelope.data import EnvelopeError, read_envelope_file
 
@@ -170,13 +235,12 @@ def _is_partial(path: Path) -> bool:
 
 def _query(arguments: argparse.Namespace) -> int:
     """Exit code 0 safe, 1 not safe (like ``helireach plan``), 2 bad input."""
-    import math
-
     from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
     from helireach_ros.core.units import FT, KT
 
-    if not (math.isfinite(arguments.height_ft) and math.isfinite(arguments.speed_kt)):
-        return _error(f"--height-ft and --speed-kt must be finite, got {arguments.height_ft}, {arguments.speed_kt}")
+    given = (arguments.height_ft, arguments.speed_kt, arguments.climb_rate_fpm)
+    if not all(math.isfinite(value) for value in given):
+        return _error(f"--height-ft, --speed-kt and --climb-rate-fpm must be finite, got {', '.join(map(str, given))}")
     try:
         airframe = None
         if arguments.airframe:
@@ -189,11 +253,12 @@ def _query(arguments: argparse.Namespace) -> int:
         envelope = load_envelope(arguments.file, airframe=airframe)
     except EnvelopeError as error:
         return _error(str(error))
-    answer = envelope.query(arguments.height_ft * FT, arguments.speed_kt * KT)
+    answer = envelope.query(arguments.height_ft * FT, arguments.speed_kt * KT, arguments.climb_rate_fpm * FT / 60.0)
     if arguments.json:
         document = answer.to_dict() | {
             "height_ft": arguments.height_ft,
             "speed_kt": arguments.speed_kt,
+            "climb_rate_fpm": arguments.climb_rate_fpm,
             "margin_units": "ft/kt",
             "envelope_id": envelope.envelope_id,
             "airframe": envelope.airframe_name,
@@ -202,7 +267,8 @@ def _query(arguments: argparse.Namespace) -> int:
         print(json.dumps(document))
     else:
         print(
-            f"{arguments.height_ft:g} ft, {arguments.speed_kt:g} kt: {answer.status} (value {answer.value:.3f}, "
+            f"{arguments.height_ft:g} ft, {arguments.speed_kt:g} kt, {arguments.climb_rate_fpm:+g} ft/min: "
+            f"{answer.status} (value {answer.value:.3f}, "
             f"margin {answer.margin:.1f} ft/kt) [{envelope.airframe_name}, envelope {envelope.envelope_id}]"
         )
     return 0 if answer.status == "safe" else 1  # unsafe, unverified, failed and outside are all "not safe"
@@ -210,14 +276,26 @@ def _query(arguments: argparse.Namespace) -> int:
 
 def _plot(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
-    from helireach_ros.core.envelope.plot import plot_envelope
+    from helireach_ros.core.envelope.plot import plot_all_slices, plot_envelope, plot_overlay
+    from helireach_ros.core.units import FT
 
+    climb_rate = None if arguments.climb_rate_fpm is None else arguments.climb_rate_fpm * FT / 60.0
+    if climb_rate is not None and not math.isfinite(climb_rate):
+        return _error(f"--climb-rate-fpm must be finite, got {arguments.climb_rate_fpm}")
     try:
-        envelope = load_envelope(arguments.file)
+        envelopes = [load_envelope(file) for file in arguments.files]
     except EnvelopeError as error:
         return _error(str(error))
+    if arguments.all_slices and (len(envelopes) > 1 or not envelopes[0].is_3d or climb_rate is not None):
+        return _error("--all-slices draws every slice of one 3-D file (no --climb-rate-fpm)")
     try:
-        path = plot_envelope(envelope, arguments.out, title_extra=arguments.title)
+        if len(envelopes) > 1:
+            names = [Path(file).name for file in arguments.files]
+            path = plot_overlay(envelopes, arguments.out, names, climb_rate=climb_rate, title_extra=arguments.title)
+        elif arguments.all_slices:
+            path = plot_all_slices(envelopes[0], arguments.out, title_extra=arguments.title)
+        else:
+            path = plot_envelope(envelopes[0], arguments.out, title_extra=arguments.title, climb_rate=climb_rate)
     except (OSError, ValueError) as error:
         return _error(f"cannot write {arguments.out}: {error}")
     print(path)

@@ -72,7 +72,8 @@ class EnvelopeEvidence:
     """The envelope's answer at the measured height and speed.
 
     Attributes:
-        status: the query's status (``safe``, ``unsafe``, ``unverified``, ``failed``, ``outside``).
+        status: the query's status (``safe``, ``unsafe``, ``unverified``, ``failed``, ``no_trim`` (a 3-D
+            envelope node without steady flight), ``outside``).
         margin: ft/kt from the not-proven-safe set (signed).
         by_interpolation: the enclosing grid nodes disagree (some safe, some not).
         domain: whether the measured state lies in the envelope's validity domain.
@@ -147,6 +148,8 @@ def _envelope_level(evidence: EnvelopeEvidence, warn_margin: float) -> tuple[str
         return "ERROR", "AVOID: outside the envelope grid, unknown"
     if evidence.status == "unsafe":
         return "ERROR", "AVOID: no safe landing"
+    if evidence.status == "no_trim":
+        return "ERROR", "AVOID: safe landing not proven, no steady flight at this climb rate in the envelope"
     return "ERROR", f"AVOID: safe landing not proven, {evidence.status}"
 
 

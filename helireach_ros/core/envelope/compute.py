@@ -31,6 +31,11 @@ Warm starts between tasks always pass through the stored float32 form of a plan,
 does not depend on where or in which order tasks ran: serial, local processes and a Dask cluster
 give identical envelopes, and a resumed computation equals an uninterrupted one.
 
+**3-D envelopes** (``climb_rates``): each climb-rate slice is a 2-D envelope of states trimmed on that flight
+path, computed by exactly these phases; the slices' tasks run together in each phase (one pool or cluster
+for all), and the result is their stack (:func:`~helireach_ros.core.envelope.data.stack_slices`). A node
+whose (speed, climb rate) has no steady powered flight is stored as ``no_trim`` without a solve.
+
 Ctrl-C (or SIGTERM) saves a partial envelope file; ``resume=True`` continues it. Tasks that were
 running are redone (a sweep task is one column, a few seconds of work).
 """
@@ -57,12 +62,14 @@ from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION,
+    FORMAT_VERSION_3D,
     PENDING,
     STATUS_CODES,
     Envelope,
     EnvelopeError,
     read_envelope_file,
     save_envelope,
+    stack_slices,
 )
 from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.envelope.progress import NullProgress, Progress
@@ -100,8 +107,10 @@ EXTRA_NODE_ARRAY = "warm_from_not_safe"
 CHECKPOINT_INTERVAL_S = 60.0
 """A long computation saves a partial file this often (and always on Ctrl-C)."""
 
-_SAFE, _UNSAFE, _UNVERIFIED, _FAILED = (STATUS_CODES[name] for name in ("safe", "unsafe", "unverified", "failed"))
-_RANK = {_SAFE: 0, _UNVERIFIED: 1, _FAILED: 2, _UNSAFE: 3}
+_SAFE, _UNSAFE, _UNVERIFIED, _FAILED, _NO_TRIM = (
+    STATUS_CODES[name] for name in ("safe", "unsafe", "unverified", "failed", "no_trim")
+)
+_RANK = {_SAFE: 0, _UNVERIFIED: 1, _FAILED: 2, _NO_TRIM: 3, _UNSAFE: 4}
 
 
 class ComputeInterrupted(KeyboardInterrupt):
@@ -114,7 +123,12 @@ class ComputeInterrupted(KeyboardInterrupt):
 
 @dataclass(frozen=True)
 class EnvelopeJob:
-    """What one envelope is computed for: airframe, settings, power-loss level and grid (SI)."""
+    """What one envelope is computed for: airframe, settings, power-loss level and grid (SI).
+
+    ``climb_rates`` (m/s, positive up, ascending) makes it a 3-D envelope, one slice per climb rate
+    (:meth:`slice_jobs`); ``climb_rate`` is the flight path the nodes of a 2-D job (or of one slice) are
+    trimmed on (0: level, today's envelope).
+    """
 
     airframe: Airframe
     settings: PlannerSettings
@@ -127,14 +141,32 @@ class EnvelopeJob:
     """The sweep before issue 13: cold restart after every not-safe node and a cold re-check of every
     candidate. Same classification, more cold solves; kept for same-run comparisons (``bench/envelope_throughput.py
     --baseline``)."""
+    climb_rates: tuple[float, ...] | None = None
+    """The climb axis of a 3-D envelope, m/s (None: a 2-D envelope at ``climb_rate``)."""
+    climb_rate: float = 0.0
+    """m/s, positive up: the flight path every node of this (2-D or slice) job is trimmed on."""
 
     def __post_init__(self) -> None:
-        for name, axis in (("heights", self.heights), ("speeds", self.speeds)):
+        axes = [("heights", self.heights, 2), ("speeds", self.speeds, 2)]
+        if self.climb_rates is not None:
+            axes.append(("climb_rates", self.climb_rates, 1))
+        for name, axis, minimum in axes:
             values = np.asarray(axis, dtype=float)
-            if values.ndim != 1 or values.size < 2 or not np.all(np.isfinite(values)) or np.any(np.diff(values) <= 0):
-                raise ValueError(f"{name} must hold >= 2 finite, strictly ascending values")
+            if (
+                values.ndim != 1 or values.size < minimum or not np.all(np.isfinite(values))
+                or np.any(np.diff(values) <= 0)
+            ):  # fmt: skip
+                raise ValueError(f"{name} must hold >= {minimum} finite, strictly ascending values")
+        if not math.isfinite(self.climb_rate):
+            raise ValueError(f"climb rate must be finite, got {self.climb_rate!r}")
         if not 0.0 <= self.power_fraction <= 1.0:
             raise ValueError(f"power fraction must lie in [0, 1], got {self.power_fraction!r}")
+
+    def slice_jobs(self) -> tuple[EnvelopeJob, ...]:
+        """One 2-D job per climb slice (a 2-D job: itself)."""
+        if self.climb_rates is None:
+            return (self,)
+        return tuple(dataclasses.replace(self, climb_rates=None, climb_rate=float(c)) for c in self.climb_rates)
 
 
 @dataclass(frozen=True)
@@ -197,7 +229,7 @@ def _warm_start_of(solution: _Solution):
     """The planner warm start stored in a solution (float32 → float64), or None without a plan."""
     from helireach_ros.core.planner import WarmStart
 
-    if solution.primal is None or solution.status == _FAILED:
+    if solution.primal is None or solution.status in (_FAILED, _NO_TRIM):
         return None
     return WarmStart(
         solution.primal.astype(float),
@@ -207,15 +239,23 @@ def _warm_start_of(solution: _Solution):
 
 
 def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None) -> _Solution:
-    """One ``plan`` from level trim at (height, speed) after the failure; errors become ``failed``."""
+    """One ``plan`` from trim on ``job.climb_rate`` at (height, speed) after the failure.
+
+    A (speed, climb rate) without steady powered flight is ``no_trim`` (no solve, so not warm-started);
+    solver errors become ``failed``.
+    """
     from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import get_planner
 
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
-        state = initial_state_after_failure(job.airframe, height, speed, job.power_fraction)
+        state = initial_state_after_failure(job.airframe, height, speed, job.power_fraction, climb_rate=job.climb_rate)
+    except ValueError as error:  # e.g. a descent faster than the fuselage's terminal descent
+        log.debug("no trim at V=%.2f m/s, climb %.2f m/s: %s", speed, job.climb_rate, error)
+        return _Solution(_NO_TRIM, math.nan, math.nan, math.nan, False, -1, 0.0, False)
+    try:
         plan = get_planner(job.airframe, job.settings, job.codegen).plan(state, warm_start=warm_start)
-    except (ValueError, RuntimeError) as error:  # e.g. no level trim below the stall limit
+    except (ValueError, RuntimeError) as error:
         log.debug("solve at h=%.2f m, V=%.2f m/s failed: %s", height, speed, error)
         return _Solution(_FAILED, math.nan, math.nan, math.nan, False, -1, 0.0, warm_start is not None)
     failed = plan.status == "failed"
@@ -439,16 +479,14 @@ class _EnvelopeState:
         self.counters = dict.fromkeys(
             ("sweep_solves", "sweep_warm_solves", "sweep_warm_from_not_safe", "sweep_guesses_replaced_cold",
              "cold_rechecks", "cold_rechecks_of_not_safe_starts", "cold_rechecks_changed_status",
-             "rechecks_skipped_unsafe", "bisection_solves", "bisection_cold_solves"),
+             "rechecks_skipped_unsafe", "bisection_solves", "bisection_cold_solves", "no_trim_nodes"),
             0,
         )  # fmt: skip
-        self.phase_seconds: dict[str, float] = {}
         # per phase: IPOPT seconds and solve + decode + replay seconds summed over tasks (worker time)
         self.phase_solver_seconds: dict[str, float] = {}
         self.phase_point_seconds: dict[str, float] = {}
         self.phase_cpu_seconds: dict[str, float] = {}
         self.skipped_rechecks: set[tuple[int, int]] = set()
-        self.previous_wall_time_s = 0.0
 
     # node access
     def codes(self) -> np.ndarray:
@@ -474,7 +512,9 @@ class _EnvelopeState:
         for row, solution in enumerate(solutions):
             self.solutions[(row, column)] = solution
             self.cold_checked[row, column] = not solution.warm_started
-        self.counters["sweep_solves"] += len(solutions)
+        no_trim = sum(solution.status == _NO_TRIM for solution in solutions)
+        self.counters["no_trim_nodes"] += no_trim
+        self.counters["sweep_solves"] += len(solutions) - no_trim
         self.counters["sweep_warm_solves"] += sum(solution.warm_started for solution in solutions)
         self.counters["sweep_warm_from_not_safe"] += sum(solution.warm_from_not_safe for solution in solutions)
         self.counters["sweep_guesses_replaced_cold"] += sum(solution.discarded_solve_ms > 0 for solution in solutions)
@@ -502,9 +542,12 @@ class _EnvelopeState:
         self._account("boundary", point.solver_ms, point.point_time_ms, point.point_cpu_ms)
 
     # conversion
-    def to_envelope(self, metadata: dict[str, Any], complete: bool) -> Envelope:
+    def to_envelope(
+        self, metadata: dict[str, Any], complete: bool, sizes: dict[str, tuple[int, ...]] | None = None
+    ) -> Envelope:
+        """This (2-D) grid as an envelope; ``sizes``: the plans' array shapes (default: from its own plans)."""
         shape = self.shape
-        sizes = _plan_sizes(self.solutions.values())
+        sizes = sizes or _plan_sizes(self.solutions.values())
         arrays: dict[str, np.ndarray] = {
             "heights": np.asarray(self.job.heights, float),
             "speeds": np.asarray(self.job.speeds, float),
@@ -546,7 +589,8 @@ class _EnvelopeState:
         return Envelope(arrays, metadata)
 
     @classmethod
-    def from_envelope(cls, job: EnvelopeJob, envelope: Envelope) -> _EnvelopeState:
+    def from_envelope(cls, job: EnvelopeJob, envelope: Envelope, restore_counters: bool = True) -> _EnvelopeState:
+        """The state of a (2-D) partial envelope; ``restore_counters``: continue its recorded counters."""
         state = cls(job)
         arrays = envelope.arrays
         interpolation = envelope.metadata.get("control_interpolation", "")
@@ -580,8 +624,8 @@ class _EnvelopeState:
                 0, 0,
             )  # fmt: skip
         compute = envelope.metadata.get("compute", {})
-        state.counters.update({k: int(v) for k, v in compute.get("counters", {}).items() if k in state.counters})
-        state.previous_wall_time_s = float(compute.get("wall_time_s", 0.0))
+        if restore_counters:
+            state.counters.update({k: int(v) for k, v in compute.get("counters", {}).items() if k in state.counters})
         return state
 
 
@@ -604,11 +648,26 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
     import casadi
 
     airframe = job.airframe.as_dict() | {"digest": job.airframe.digest()}
+    grid = dict(grid_spec or {}, heights_count=len(job.heights), speeds_count=len(job.speeds))
+    domain = ValidityDomain(climb_rates=(job.climb_rate,) if job.climb_rates is None else tuple(job.climb_rates))
+    three_d: dict[str, Any] = {}
+    if job.climb_rates is not None:
+        grid["climb_rates_count"] = len(job.climb_rates)
+        three_d = {
+            "climb_rates_m_s": [float(c) for c in job.climb_rates],
+            "climb_rates_fpm": [round(float(c) / (FT / 60.0), 3) for c in job.climb_rates],
+        }
     return {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION,
-        "description": "H-V envelope: verified landing analysis from level trim after an engine failure on a "
-        "height x speed grid (Kirchner et al. 2020 reachability; helireach_ros)",
+        "format_version": FORMAT_VERSION if job.climb_rates is None else FORMAT_VERSION_3D,
+        "description": (
+            "H-V envelope: verified landing analysis from level trim after an engine failure on a height x speed grid"
+            if job.climb_rates is None
+            else "3-D H-V envelope: verified landing analysis from steady flight on a climb rate x height x speed "
+            "grid after an engine failure"
+        )
+        + " (Kirchner et al. 2020 reachability; helireach_ros)",
+        **three_d,
         "units": {
             "heights": "m",
             "speeds": "m/s",
@@ -616,14 +675,15 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
             "time_to_land": "s",
             "boundary": "(height m, speed m/s)",
             "margin": "ft and kt in one plane (1 ft = 1 kt = 1)",
+            **({"climb_rates": "m/s, positive up"} if job.climb_rates is not None else {}),
         },
-        "grid": dict(grid_spec or {}, heights_count=len(job.heights), speeds_count=len(job.speeds)),
+        "grid": grid,
         "airframe": airframe,
         "settings": dataclasses.asdict(job.settings),
         "method": job.settings.method,
         "power_fraction": float(job.power_fraction),
-        # where the answers hold (level trim at nominal rotor speed, within tolerances): core/envelope/domain.py
-        "validity_domain": ValidityDomain().to_metadata(),
+        # where the answers hold (trim at nominal rotor speed, within tolerances): core/envelope/domain.py
+        "validity_domain": domain.to_metadata(),
         "status_codes": dict(STATUS_CODES, pending=PENDING),
         "plan_storage": "float32 per node: NLP primal, bound and constraint multipliers (planner.WarmStart); "
         "control breakpoints and values",
@@ -650,6 +710,12 @@ def _check_resumable(job: EnvelopeJob, envelope: Envelope, path: Path) -> None:
         raise EnvelopeError(f"{where} has another height grid than requested")
     if envelope.speeds.shape != (len(job.speeds),) or not np.allclose(envelope.speeds, job.speeds, atol=1e-9):
         raise EnvelopeError(f"{where} has another speed grid than requested")
+    stored = envelope.climb_rates
+    if (stored is None) != (job.climb_rates is None) or (
+        stored is not None
+        and (stored.shape != (len(job.climb_rates),) or not np.allclose(stored, job.climb_rates, atol=1e-9))
+    ):
+        raise EnvelopeError(f"{where} has another climb-rate axis than requested")
 
 
 def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
@@ -704,6 +770,11 @@ def _boundary_edges(state: _EnvelopeState) -> list[tuple[int, int, int, int]]:
     return edges
 
 
+def _in_slice(index: int, function: Callable[..., Any], *arguments: Any) -> tuple[int, Any]:
+    """Runs one task of climb slice ``index`` (module level: it runs in worker processes or on Dask)."""
+    return index, function(*arguments)
+
+
 def compute_envelope(
     job: EnvelopeJob,
     executor=None,
@@ -713,7 +784,7 @@ def compute_envelope(
     command: str | None = None,
     grid_spec: dict[str, str] | None = None,
 ) -> Envelope:
-    """Computes (or resumes) one envelope; saves it to ``out_path`` if given.
+    """Computes (or resumes) one envelope, 2-D or 3-D (``job.climb_rates``); saves it to ``out_path`` if given.
 
     Args:
         job: airframe, settings, power fraction and grid.
@@ -735,7 +806,9 @@ def compute_envelope(
     progress = progress or NullProgress()
     path = Path(out_path) if out_path is not None else None
     metadata = _base_metadata(job, command, grid_spec)
-    state = _EnvelopeState(job)
+    slice_jobs = job.slice_jobs()
+    states = [_EnvelopeState(slice_job) for slice_job in slice_jobs]
+    previous_wall_time_s = 0.0
     if resume:
         if path is None:
             raise EnvelopeError("resume needs the output file of the interrupted computation")
@@ -744,28 +817,48 @@ def compute_envelope(
         if previous.complete:
             progress.message(f"{path}: already complete (envelope {previous.envelope_id}); nothing to do")
             return previous
-        state = _EnvelopeState.from_envelope(job, previous)
-        progress.message(f"{path}: resuming ({len(state.solutions)} of {math.prod(state.shape)} nodes done)")
+        # the file's counters are totals over the slices: restored once, into the first slice
+        states = [
+            _EnvelopeState.from_envelope(slice_job, previous.slice(index), restore_counters=index == 0)
+            for index, slice_job in enumerate(slice_jobs)
+        ]
+        previous_wall_time_s = float(previous.metadata.get("compute", {}).get("wall_time_s", 0.0))
+        done = sum(len(state.solutions) for state in states)
+        total = sum(math.prod(state.shape) for state in states)
+        progress.message(f"{path}: resuming ({done} of {total} nodes done)")
 
     started = time.perf_counter()
     last_checkpoint = [time.monotonic()]
+    phase_seconds: dict[str, float] = {}
+
+    def summed(name: str) -> dict[str, float]:
+        total: dict[str, float] = {}
+        for state in states:
+            for phase, seconds in getattr(state, name).items():
+                total[phase] = total.get(phase, 0.0) + seconds
+        return {phase: round(seconds, 3) for phase, seconds in total.items()}
 
     def snapshot(complete: bool) -> Envelope:
-        wall = state.previous_wall_time_s + time.perf_counter() - started
+        counters = {name: sum(state.counters[name] for state in states) for name in states[0].counters}
         compute = {
-            "wall_time_s": round(wall, 3),
-            "phases_s": {k: round(v, 3) for k, v in state.phase_seconds.items()},
+            "wall_time_s": round(previous_wall_time_s + time.perf_counter() - started, 3),
+            "phases_s": {k: round(v, 3) for k, v in phase_seconds.items()},
             # summed over workers, this run only (a resumed run counts what it computed itself)
-            "phase_ipopt_s": {k: round(v, 3) for k, v in state.phase_solver_seconds.items()},
-            "phase_solve_and_replay_s": {k: round(v, 3) for k, v in state.phase_point_seconds.items()},
-            "phase_solve_and_replay_cpu_s": {k: round(v, 3) for k, v in state.phase_cpu_seconds.items()},
+            "phase_ipopt_s": summed("phase_solver_seconds"),
+            "phase_solve_and_replay_s": summed("phase_point_seconds"),
+            "phase_solve_and_replay_cpu_s": summed("phase_cpu_seconds"),
             "executor": executor.description,
-            "counters": dict(state.counters),
-            "nodes": math.prod(state.shape),
-            "boundary_points": len(state.boundary),
+            "counters": counters,
+            "nodes": sum(math.prod(state.shape) for state in states),
+            "boundary_points": sum(len(state.boundary) for state in states),
             "finished_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds") if complete else None,
         }
-        return state.to_envelope(dict(metadata, compute=compute), complete)
+        metadata_now = dict(metadata, compute=compute)
+        if job.climb_rates is None:
+            return states[0].to_envelope(metadata_now, complete)
+        sizes = _plan_sizes(solution for state in states for solution in state.solutions.values())
+        slices = [state.to_envelope(metadata_now, complete, sizes) for state in states]
+        return stack_slices(slices, job.climb_rates, dict(metadata_now, complete=complete))
 
     def checkpoint(force: bool = False) -> None:
         if path is not None and (force or time.monotonic() - last_checkpoint[0] > CHECKPOINT_INTERVAL_S):
@@ -773,16 +866,19 @@ def compute_envelope(
             last_checkpoint[0] = time.monotonic()
 
     def run_phase(name: str, function, tasks: list[tuple], units: Callable[[Any], int], handle) -> None:
+        """Runs ``function`` on tasks (slice index, arguments...); ``handle(state, result)`` takes each result."""
         phase_started = time.perf_counter()
-        progress.start(name, sum(units(task) for task in tasks))
+        progress.start(name, sum(units(arguments) for _, *arguments in tasks))
         try:
-            for result in executor.map_unordered(function, tasks):
-                handle(result)
+            for index, result in executor.map_unordered(
+                _in_slice, [(index, function, *arguments) for index, *arguments in tasks]
+            ):
+                handle(states[index], result)
                 progress.advance(units(result))
                 guard.check()
                 checkpoint()
         finally:
-            state.phase_seconds[name] = state.phase_seconds.get(name, 0.0) + time.perf_counter() - phase_started
+            phase_seconds[name] = phase_seconds.get(name, 0.0) + time.perf_counter() - phase_started
             progress.finish()
 
     guard = _InterruptGuard()
@@ -790,21 +886,34 @@ def compute_envelope(
         guard.__enter__()
         guard.check()
         rows = len(job.heights)
-        columns_left = [c for c in range(len(job.speeds)) if any((r, c) not in state.solutions for r in range(rows))]
+        sweeps = [
+            (index, state.job, column)
+            for index, state in enumerate(states)
+            for column in range(len(job.speeds))
+            if any((row, column) not in state.solutions for row in range(rows))
+        ]
         run_phase(
-            "sweep", _sweep_column, [(job, column) for column in columns_left],
-            lambda item: rows, lambda result: state.set_column(result[1], result[2]),
+            "sweep", _sweep_column, sweeps,
+            lambda item: rows, lambda state, result: state.set_column(result[1], result[2]),
         )  # fmt: skip
-        while candidates := _recheck_candidates(state):
+        while candidates := [
+            (index, state.job, row, column)
+            for index, state in enumerate(states)
+            for row, column in _recheck_candidates(state)
+        ]:
             run_phase(
-                "cold re-check", _cold_check, [(job, row, column) for row, column in candidates],
-                lambda item: 1, lambda result: state.merge_cold(result[1], result[2]),
+                "cold re-check", _cold_check, candidates,
+                lambda item: 1, lambda state, result: state.merge_cold(result[1], result[2]),
             )  # fmt: skip
-        edges = [edge for edge in _boundary_edges(state) if edge not in state.boundary]
+        edges = [
+            (index, state.job, edge, state.solutions[edge[:2]], state.solutions[edge[2:]].value)
+            for index, state in enumerate(states)
+            for edge in _boundary_edges(state)
+            if edge not in state.boundary
+        ]
         run_phase(
-            "boundary", _bisect_edge,
-            [(job, edge, state.solutions[edge[:2]], state.solutions[edge[2:]].value) for edge in edges],
-            lambda item: 1, lambda result: state.add_boundary(result[2]),
+            "boundary", _bisect_edge, edges,
+            lambda item: 1, lambda state, result: state.add_boundary(result[2]),
         )  # fmt: skip
     except KeyboardInterrupt:
         executor.abort()
@@ -814,14 +923,15 @@ def compute_envelope(
     except Exception:
         # e.g. a Dask worker without helireach_ros: keep what was computed, then report the error
         executor.abort()
-        if path is not None and state.solutions:
+        if path is not None and any(state.solutions for state in states):
             save_envelope(snapshot(complete=False), path)
         raise
     finally:
         guard.__exit__()
     # Boundary points of edges that are no longer safe/not-safe pairs (resume after a change) are dropped.
-    current_edges = set(_boundary_edges(state))
-    state.boundary = {edge: point for edge, point in state.boundary.items() if edge in current_edges}
+    for state in states:
+        current_edges = set(_boundary_edges(state))
+        state.boundary = {edge: point for edge, point in state.boundary.items() if edge in current_edges}
     envelope = snapshot(complete=True)
     if path is not None:
         save_envelope(envelope, path)

@@ -20,17 +20,32 @@ Per-cell plans are stored as float32: the NLP primal and both multiplier vectors
 :class:`~helireach_ros.core.planner.WarmStart`) and the control function (breakpoints and values), which
 is enough to warm-start the planner and to publish a fallback trajectory.
 
+**3-D envelopes** (format version 2) add a climb-rate axis: ``climb_rates`` (m/s, positive up, ascending)
+and every per-node array has a leading climb axis (C × H × S); the boundary points carry the index of
+their slice (``boundary_slice``; refinement is within a slice). Each slice is the 2-D envelope of the
+states trimmed on that flight path. A node whose (speed, climb rate) has no steady powered flight
+(:func:`~helireach_ros.core.model.trim_flight` refuses it, e.g. a descent faster than the fuselage's terminal
+descent) is stored as ``no_trim``: no state to start from, never safe. 2-D files (format version 1) are
+read unchanged; a 2-D envelope is a 3-D one with one slice at level flight.
+
 Query semantics are conservative. A state is ``safe`` only if every grid node enclosing it is safe
-(on a node: that node; on a grid line: its two end nodes; inside a cell: its four corners); outside
-the grid it is ``outside``. The margin is the signed distance, in the (ft, kt) plane where 1 ft and
-1 kt count as one unit, to the boundary of the set that is not proven safe under that same rule:
-positive for safe states, negative otherwise, so margin > 0 exactly when the status is ``safe``. The
-refined boundary points are reported and plotted, but never used to call a state safe.
+(on a node: that node; on a grid line: its two end nodes; inside a cell: its four corners; in a 3-D
+envelope the same in all three axes, up to eight nodes); outside the grid it is ``outside``. Along the
+climb axis the grid is the envelope's validity domain (:meth:`ValidityDomain.climb_rate_range
+<helireach_ros.core.envelope.domain.ValidityDomain.climb_rate_range>`): a 3-D file's climb-rate range
+exactly, a 2-D (or one-slice) file its slice ± the level-trim tolerance; a climb rate outside it is
+``outside``. The margin is the signed distance, in the (ft, kt) plane where 1 ft and 1 kt count as one
+unit, to the boundary of the set that is not proven safe under that same rule: positive for safe states,
+negative otherwise, so margin > 0 exactly when the status is ``safe``. Between two climb slices that set
+is the union of both slices' (a node of the plane is safe only if it is safe in both), so the margin is
+the 2-D margin of the combined slice. The margin does not measure along the climb axis. The refined
+boundary points are reported and plotted, but never used to call a state safe.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import hashlib
 import io
 import json
@@ -38,12 +53,14 @@ import math
 import os
 import zipfile
 import zlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.resources import config_path, source_root
 from helireach_ros.core.units import FT, KT
 
@@ -56,6 +73,7 @@ __all__ = [
     "DEFAULT_ENVELOPE",
     "FORMAT_NAME",
     "FORMAT_VERSION",
+    "FORMAT_VERSION_3D",
     "PENDING",
     "QUERY_STATUSES",
     "STATUS_CODES",
@@ -68,22 +86,27 @@ __all__ = [
     "read_envelope_file",
     "save_envelope",
     "settings_differences",
+    "stack_slices",
 ]
 
 FORMAT_NAME = "helireach-envelope"
 FORMAT_VERSION = 1
+"""Format version of 2-D files (height × speed), unchanged since the first release."""
+FORMAT_VERSION_3D = 2
+"""Format version of 3-D files (climb rate × height × speed): ``climb_rates`` and ``boundary_slice`` arrays."""
+_READABLE_VERSIONS = {FORMAT_VERSION: False, FORMAT_VERSION_3D: True}  # version -> holds a climb axis
 DEFAULT_ENVELOPE = "envelopes/uh60a_class_total_power_loss.npz"
 """The shipped envelope, relative to ``config/``."""
 
-STATUS_CODES = {"safe": 0, "unsafe": 1, "unverified": 2, "failed": 3}
-"""Per-cell status as stored in the file (int8)."""
+STATUS_CODES = {"safe": 0, "unsafe": 1, "unverified": 2, "failed": 3, "no_trim": 4}
+"""Per-cell status as stored in the file (int8). ``no_trim``: no steady flight at that (speed, climb rate)."""
 PENDING = -1
 """Status code of a cell a partial (interrupted) computation has not finished."""
 _STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
 QUERY_STATUSES = (*STATUS_CODES, "outside")
 
 # Between enclosing nodes of different status, the query reports the most conservative one.
-_CONSERVATISM = {"safe": 0, "unverified": 1, "failed": 2, "unsafe": 3}
+_CONSERVATISM = {"safe": 0, "unverified": 1, "failed": 2, "no_trim": 3, "unsafe": 4}
 
 # Arrays every envelope file holds: name -> (dtype kind, number of leading grid dimensions).
 _REQUIRED_ARRAYS = {
@@ -109,6 +132,9 @@ _REQUIRED_ARRAYS = {
     "boundary_edge": "i",
 }
 _CELL_ARRAYS = tuple(name for name in _REQUIRED_ARRAYS if name not in {"heights", "speeds"} and "boundary" not in name)
+_CLIMB_ARRAYS = ("climb_rates", "boundary_slice")
+"""The arrays a 3-D file holds beyond the 2-D ones."""
+_FPM = FT / 60.0
 
 
 class EnvelopeError(ValueError):
@@ -117,10 +143,10 @@ class EnvelopeError(ValueError):
 
 @dataclass(frozen=True)
 class EnvelopeQuery:
-    """The envelope's answer for one (height, speed).
+    """The envelope's answer for one (height, speed[, climb rate]).
 
     Attributes:
-        status: ``"safe"``, ``"unsafe"``, ``"unverified"``, ``"failed"`` or ``"outside"``.
+        status: ``"safe"``, ``"unsafe"``, ``"unverified"``, ``"failed"``, ``"no_trim"`` or ``"outside"``.
         value: the largest optimal value among the enclosing nodes (> 0: unsafe); NaN outside
             the grid or when an enclosing node failed.
         margin: signed distance to the not-proven-safe set in the (ft, kt) plane: > 0 when safe,
@@ -144,7 +170,7 @@ class StoredPlan:
     """The plan stored for one grid node.
 
     Attributes:
-        height: m; ``speed``: m/s (the node's level-trim state at the failure).
+        height: m; ``speed``: m/s (the node's trim state at the failure).
         status: the node's status.
         value: its optimal value.
         time_to_land: s.
@@ -162,6 +188,8 @@ class StoredPlan:
     control_times: np.ndarray
     control_values: np.ndarray
     control_interpolation: str
+    climb_rate: float = 0.0
+    """m/s, positive up: the flight path the node was trimmed on (0 in a 2-D envelope)."""
 
     def controls_at(self, times) -> np.ndarray:
         """The planned (C_T, θ) at the given times, 2 × len(times) (held constant outside the plan)."""
@@ -199,21 +227,22 @@ def _array_property(name: str, doc: str) -> property:
 
 
 class Envelope:
-    """An immutable H-V envelope (see the module docstring for the semantics).
+    """An immutable H-V envelope, 2-D or 3-D (see the module docstring for the semantics).
 
     Construct it with :func:`load_envelope` or :mod:`helireach_ros.core.envelope.compute`; the
     constructor validates shapes and codes but not the checksum (that is the file's business).
 
     Attributes:
-        heights: grid heights above ground, m, ascending (axis 0).
-        speeds: grid forward speeds, m/s, ascending (axis 1).
-        status: H × S array of ``"safe"``/``"unsafe"``/``"unverified"``/``"failed"``
-            (``"pending"`` only in a partial envelope).
-        value: H × S optimal values (NaN where the solver failed).
-        time_to_land: H × S, s.
+        heights: grid heights above ground, m, ascending.
+        speeds: grid forward speeds, m/s, ascending.
+        climb_rates: grid climb rates, m/s, positive up, ascending (axis 0 of a 3-D envelope); None in a 2-D one.
+        status: H × S (3-D: C × H × S) array of ``"safe"``/``"unsafe"``/``"unverified"``/``"failed"``/
+            ``"no_trim"`` (``"pending"`` only in a partial envelope).
+        value: optimal values, same shape (NaN where the solver failed or there is no trim).
+        time_to_land: same shape, s.
         boundary: B × 2 refined boundary points (height m, speed m/s): on each grid line between a
             safe and an unsafe/unverified node, the last point proven safe, within 2 ft / 1 kt
-            (by default) of the first point found not safe.
+            (by default) of the first point found not safe (3-D: of the slice ``arrays["boundary_slice"]``).
         metadata: a copy of the file's metadata dict.
         envelope_id: a short hash of the content and metadata.
         airframe_name: the airframe's name.
@@ -221,6 +250,8 @@ class Envelope:
 
     def __init__(self, arrays: dict[str, np.ndarray], metadata: dict[str, Any]) -> None:
         missing = sorted(set(_REQUIRED_ARRAYS) - set(arrays))
+        if "climb_rates" in arrays:
+            missing += [name for name in _CLIMB_ARRAYS if name not in arrays]
         if missing:
             raise EnvelopeError(f"envelope is missing array(s): {', '.join(missing)}")
         self._arrays = {name: _readonly(np.asarray(array)) for name, array in arrays.items()}
@@ -233,38 +264,84 @@ class Envelope:
                 self._arrays["status_code"]
             ).astype("U10")
         )
-        self._margin_geometry = _MarginGeometry(self.heights / FT, self.speeds / KT, self._arrays["status_code"] == 0)
+        try:
+            domain = ValidityDomain.from_metadata(self._metadata)
+        except (TypeError, ValueError) as error:
+            raise EnvelopeError(f"metadata 'validity_domain' is not valid: {error}") from None
+        if self.is_3d:  # the file's own axis is the domain's climb rates, whatever the metadata says
+            domain = dataclasses.replace(domain, climb_rates=tuple(float(c) for c in self._arrays["climb_rates"]))
+        self._domain = domain
+        # every query reads C × H × S arrays: a 2-D envelope is one slice
+        self._stacked = {
+            name: self._arrays[name] if self.is_3d else self._arrays[name][None]
+            for name in ("status_code", "value", "plan_primal")
+        }
+        safe = self._stacked["status_code"] == 0
+        heights_ft, speeds_kt = self.heights / FT, self.speeds / KT
+        # margins between two slices use the combined slice (safe only where both are): one per enclosing set
+        self._margin_geometry = {(k,): _MarginGeometry(heights_ft, speeds_kt, safe[k]) for k in range(safe.shape[0])}
+        self._margin_geometry.update(
+            {
+                (k, k + 1): _MarginGeometry(heights_ft, speeds_kt, safe[k] & safe[k + 1])
+                for k in range(safe.shape[0] - 1)
+            }
+        )
 
     def _validate(self) -> None:
         arrays = self._arrays
         for name, kind in _REQUIRED_ARRAYS.items():
             if arrays[name].dtype.kind != kind and not (kind == "i" and arrays[name].dtype.kind == "u"):
                 raise EnvelopeError(f"array {name!r} has dtype {arrays[name].dtype}, expected kind {kind!r}")
-        heights, speeds = arrays["heights"], arrays["speeds"]
-        for name, axis in (("heights", heights), ("speeds", speeds)):
-            if axis.ndim != 1 or axis.size < 2 or not np.all(np.isfinite(axis)) or np.any(np.diff(axis) <= 0):
-                raise EnvelopeError(f"grid axis {name!r} must hold >= 2 finite, strictly ascending values")
-        grid = (heights.size, speeds.size)
+        axes = [("heights", arrays["heights"]), ("speeds", arrays["speeds"])]
+        if self.is_3d:
+            axes.insert(0, ("climb_rates", arrays["climb_rates"]))
+        for name, axis in axes:
+            minimum = 1 if name == "climb_rates" else 2
+            if axis.ndim != 1 or axis.size < minimum or not np.all(np.isfinite(axis)) or np.any(np.diff(axis) <= 0):
+                raise EnvelopeError(f"grid axis {name!r} must hold >= {minimum} finite, strictly ascending values")
+        grid = tuple(axis.size for _, axis in axes)
         for name in _CELL_ARRAYS:
-            if arrays[name].shape[:2] != grid:
+            if arrays[name].shape[: len(grid)] != grid:
                 raise EnvelopeError(f"array {name!r} has shape {arrays[name].shape}, expected {grid} leading")
         codes = arrays["status_code"]
         if not np.all(np.isin(codes, [PENDING, *STATUS_CODES.values()])):
             raise EnvelopeError("status_code holds unknown codes")
         boundary_count = arrays["boundary"].shape[0]
-        for name, width in (("boundary", 2), ("boundary_unsafe_side", 2), ("boundary_edge", 4)):
+        widths = [("boundary", 2), ("boundary_unsafe_side", 2), ("boundary_edge", 4)]
+        for name, width in widths:
             if arrays[name].shape != (boundary_count, width):
                 expected = (boundary_count, width)
                 raise EnvelopeError(f"array {name!r} has shape {arrays[name].shape}, expected {expected}")
+        if self.is_3d:
+            slices = arrays["boundary_slice"]
+            if slices.shape != (boundary_count,) or slices.dtype.kind not in "iu":
+                raise EnvelopeError(f"array 'boundary_slice' must be {boundary_count} integers")
+            if boundary_count and not (0 <= slices.min() and slices.max() < grid[0]):
+                raise EnvelopeError("array 'boundary_slice' names a climb slice that does not exist")
         if self._metadata.get("format") != FORMAT_NAME:
             raise EnvelopeError(f"metadata format is {self._metadata.get('format')!r}, expected {FORMAT_NAME!r}")
 
     # --- the contract's attributes -------------------------------------------------------------
-    heights = _array_property("heights", "Grid heights above ground, m, ascending (axis 0).")
-    speeds = _array_property("speeds", "Grid forward speeds, m/s, ascending (axis 1).")
-    value = _array_property("value", "H × S optimal values (NaN where the solver failed).")
-    time_to_land = _array_property("time_to_land", "H × S landing times of the stored plans, s.")
+    heights = _array_property("heights", "Grid heights above ground, m, ascending.")
+    speeds = _array_property("speeds", "Grid forward speeds, m/s, ascending.")
+    value = _array_property("value", "Optimal values, H × S (3-D: C × H × S); NaN where the solver failed.")
+    time_to_land = _array_property("time_to_land", "Landing times of the stored plans, s, shaped like ``value``.")
     boundary = _array_property("boundary", "B × 2 refined boundary points (height m, speed m/s), the safe side.")
+
+    @property
+    def is_3d(self) -> bool:
+        """The envelope has a climb-rate axis (format version 2)."""
+        return "climb_rates" in self._arrays
+
+    @property
+    def climb_rates(self) -> np.ndarray | None:
+        """Climb rates of the slices, m/s, positive up, ascending; None for a 2-D (level-trim) envelope."""
+        return self._arrays["climb_rates"] if self.is_3d else None
+
+    @property
+    def validity_domain(self) -> ValidityDomain:
+        """Where the envelope's answers hold (its climb rates are the file's climb axis in a 3-D envelope)."""
+        return self._domain
 
     @property
     def status(self) -> np.ndarray:
@@ -303,75 +380,138 @@ class Envelope:
         """Every stored array (read-only views), e.g. ``verified``, ``iterations``, ``cold_checked``."""
         return dict(self._arrays)
 
+    # --- climb slices --------------------------------------------------------------------------
+    def nearest_slice(self, climb_rate: float) -> int:
+        """Index of the climb slice nearest to ``climb_rate`` (m/s; 0 for a 2-D envelope).
+
+        Raises:
+            ValueError: a climb rate that is not a finite number.
+        """
+        climb_rate = _as_float(climb_rate)
+        if not math.isfinite(climb_rate):
+            raise ValueError(f"climb rate must be a finite number, got {climb_rate!r}")
+        return int(np.argmin(np.abs(self.climb_rates - climb_rate))) if self.is_3d else 0
+
+    def slice(self, index: int) -> Envelope:
+        """The 2-D envelope of one climb slice (a 2-D envelope returns itself).
+
+        Its metadata gains ``climb_slice`` (index, climb rate in m/s and ft/min) and a validity domain at that
+        climb rate ± the level tolerance; its boundary points are the slice's own.
+        """
+        if not self.is_3d:
+            return self
+        count = self.climb_rates.size
+        if not -count <= index < count:
+            raise IndexError(f"climb slice {index} of an envelope with {count}")
+        index %= count
+        climb_rate = float(self.climb_rates[index])
+        arrays = {
+            name: array if _is_axis_or_boundary(name) else array[index]  # every other array is per node
+            for name, array in self._arrays.items()
+            if name not in _CLIMB_ARRAYS
+        }
+        in_slice = self._arrays["boundary_slice"] == index
+        for name in ("boundary", "boundary_unsafe_side", "boundary_edge"):
+            arrays[name] = self._arrays[name][in_slice]
+        metadata = copy.deepcopy(self._metadata)
+        metadata["format_version"] = FORMAT_VERSION
+        metadata["climb_slice"] = {
+            "index": index, "climb_rate_m_s": climb_rate, "climb_rate_fpm": climb_rate / _FPM, "of": count,
+        }  # fmt: skip
+        metadata["validity_domain"] = dataclasses.replace(self._domain, climb_rates=(climb_rate,)).to_metadata()
+        return Envelope(arrays, metadata)
+
     # --- queries -------------------------------------------------------------------------------
-    def query(self, height_m: float, speed_ms: float) -> EnvelopeQuery:
-        """Status, value and margin at a level-trim state (see the module docstring).
+    def _enclosing_slices(self, climb_rate: float) -> list[int] | None:
+        """Climb slices enclosing ``climb_rate`` (1 or 2), None outside the domain's climb-rate range."""
+        low, high = self._domain.climb_rate_range()
+        if not (math.isfinite(climb_rate) and low <= climb_rate <= high):
+            return None
+        if self._stacked["status_code"].shape[0] == 1:
+            return [0]  # one slice: it speaks for its tolerance band
+        return _enclosing_nodes(self.climb_rates, climb_rate)
+
+    def query(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> EnvelopeQuery:
+        """Status, value and margin at a trimmed state (see the module docstring).
 
         Args:
             height_m: height above ground, m.
             speed_ms: forward speed, m/s.
+            climb_rate: m/s, positive up (default level flight). Outside the envelope's climb-rate range
+                (a 2-D envelope: level ± its tolerance) the answer is ``outside``.
 
         Anything that is not a finite number (NaN, inf, None, text) is ``outside``.
         """
-        height_m, speed_ms = _as_float(height_m), _as_float(speed_ms)
+        height_m, speed_ms, climb_rate = _as_float(height_m), _as_float(speed_ms), _as_float(climb_rate)
         rows = _enclosing_nodes(self.heights, height_m)
         columns = _enclosing_nodes(self.speeds, speed_ms)
-        if rows is None or columns is None:
+        slices = self._enclosing_slices(climb_rate)
+        if rows is None or columns is None or slices is None:
             return EnvelopeQuery("outside", math.nan, math.nan)
-        codes = self._arrays["status_code"][np.ix_(rows, columns)].ravel()
+        enclosing = np.ix_(slices, rows, columns)
+        codes = self._stacked["status_code"][enclosing].ravel()
         names = [_STATUS_NAMES.get(int(code), "failed") for code in codes]  # a pending node counts as failed
         status = max(names, key=_CONSERVATISM.__getitem__)
-        value = float(np.max(self.value[np.ix_(rows, columns)]))
-        margin = self._margin_geometry.margin(height_m / FT, speed_ms / KT, status == "safe")
+        value = float(np.max(self._stacked["value"][enclosing]))
+        margin = self._margin_geometry[tuple(slices)].margin(height_m / FT, speed_ms / KT, status == "safe")
         return EnvelopeQuery(status, value, margin, "safe" in names and len(set(names)) > 1)
 
-    def status_at(self, height_m: float, speed_ms: float) -> str:
-        """Shortcut for ``query(height_m, speed_ms).status``."""
-        return self.query(height_m, speed_ms).status
+    def status_at(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> str:
+        """Shortcut for ``query(height_m, speed_ms, climb_rate).status``."""
+        return self.query(height_m, speed_ms, climb_rate).status
 
-    def margin(self, height_m: float, speed_ms: float) -> float:
-        """Shortcut for ``query(height_m, speed_ms).margin`` (ft/kt units)."""
-        return self.query(height_m, speed_ms).margin
+    def margin(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> float:
+        """Shortcut for ``query(height_m, speed_ms, climb_rate).margin`` (ft/kt units)."""
+        return self.query(height_m, speed_ms, climb_rate).margin
 
-    def nearest_plan(self, height_m: float, speed_ms: float) -> StoredPlan | None:
-        """The stored plan of the nearest node (in the ft/kt plane) whose solve converged.
+    def nearest_plan(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> StoredPlan | None:
+        """The stored plan of the nearest node whose solve converged (a warm start, never a safety claim).
 
-        Returns None for a non-finite query or when no node has a usable plan.
+        Nearest in (ft, kt) — in a 3-D envelope in (climb rate, ft, kt) with the climb rate in kt
+        (1 kt ≈ 101 ft/min: the same velocity unit as the speed axis). A non-finite climb rate counts as
+        level flight. Returns None for a non-finite height or speed, or when no node has a usable plan.
         """
-        height_m, speed_ms = _as_float(height_m), _as_float(speed_ms)
+        height_m, speed_ms, climb_rate = _as_float(height_m), _as_float(speed_ms), _as_float(climb_rate)
         if not (math.isfinite(height_m) and math.isfinite(speed_ms)):
             return None
-        codes = self._arrays["status_code"]
-        primal = self._arrays["plan_primal"]
-        usable = (codes >= 0) & (codes != STATUS_CODES["failed"]) & np.all(np.isfinite(primal), axis=2)
-        if not np.any(usable):
+        codes = self._stacked["status_code"]
+        primal = self._stacked["plan_primal"]
+        usable = (codes >= 0) & (codes != STATUS_CODES["failed"]) & np.all(np.isfinite(primal), axis=3)
+        usable &= codes != STATUS_CODES["no_trim"]
+        if primal.shape[3] == 0 or not np.any(usable):
             return None
-        distance = np.hypot(
-            (self.heights[:, None] - height_m) / FT, (self.speeds[None, :] - speed_ms) / KT
-        )  # fmt: skip
+        climbs = self.climb_rates if self.is_3d else np.zeros(1)
+        climb_rate = climb_rate if math.isfinite(climb_rate) else 0.0
+        distance = np.sqrt(
+            ((climbs[:, None, None] - climb_rate) / KT) ** 2
+            + ((self.heights[None, :, None] - height_m) / FT) ** 2
+            + ((self.speeds[None, None, :] - speed_ms) / KT) ** 2
+        )
         distance[~usable] = np.inf
-        row, column = np.unravel_index(int(np.argmin(distance)), distance.shape)
-        return self.stored_plan(int(row), int(column))
+        index, row, column = np.unravel_index(int(np.argmin(distance)), distance.shape)
+        return self.stored_plan(int(row), int(column), int(index))
 
-    def stored_plan(self, row: int, column: int) -> StoredPlan:
-        """The plan stored at grid node (row, column), multipliers and all, as float64."""
+    def stored_plan(self, row: int, column: int, climb_index: int = 0) -> StoredPlan:
+        """The plan stored at grid node (row, column) [of climb slice ``climb_index``], as float64."""
         from helireach_ros.core.planner import WarmStart
 
+        node = (climb_index, row, column) if self.is_3d else (row, column)
         arrays = self._arrays
         return StoredPlan(
             height=float(self.heights[row]),
             speed=float(self.speeds[column]),
-            status=str(self.status[row, column]),
-            value=float(self.value[row, column]),
-            time_to_land=float(self.time_to_land[row, column]),
+            status=str(self.status[node]),
+            value=float(self.value[node]),
+            time_to_land=float(self.time_to_land[node]),
             warm_start=WarmStart(
-                arrays["plan_primal"][row, column].astype(float),
-                arrays["plan_bound_multipliers"][row, column].astype(float),
-                arrays["plan_constraint_multipliers"][row, column].astype(float),
+                arrays["plan_primal"][node].astype(float),
+                arrays["plan_bound_multipliers"][node].astype(float),
+                arrays["plan_constraint_multipliers"][node].astype(float),
             ),
-            control_times=arrays["plan_control_times"][row, column].astype(float),
-            control_values=arrays["plan_control_values"][row, column].astype(float),
+            control_times=arrays["plan_control_times"][node].astype(float),
+            control_values=arrays["plan_control_values"][node].astype(float),
             control_interpolation=str(self._metadata.get("control_interpolation", "zero_order_hold")),
+            climb_rate=float(self.climb_rates[climb_index]) if self.is_3d else 0.0,
         )
 
     def check_matches(
@@ -403,10 +543,51 @@ class Envelope:
 
     def __repr__(self) -> str:
         counts = {name: int(np.sum(self.status == name)) for name in STATUS_CODES}
+        climbs = f"{self.climb_rates.size}x" if self.is_3d else ""
         return (
-            f"Envelope({self.airframe_name}, {self.heights.size}x{self.speeds.size}, power_fraction="
+            f"Envelope({self.airframe_name}, {climbs}{self.heights.size}x{self.speeds.size}, power_fraction="
             f"{self.power_fraction:g}, {counts}, id={self.envelope_id})"
         )
+
+
+def _is_axis_or_boundary(name: str) -> bool:
+    return name in {"heights", "speeds", *_CLIMB_ARRAYS} or name.startswith("boundary")
+
+
+def stack_slices(slices: Sequence[Envelope], climb_rates: Sequence[float], metadata: dict[str, Any]) -> Envelope:
+    """The 3-D envelope of 2-D slices on one height × speed grid, one per climb rate (the inverse of ``slice``).
+
+    Args:
+        slices: 2-D envelopes with the same axes and the same arrays (plans of one size).
+        climb_rates: m/s, ascending, one per slice.
+        metadata: the 3-D envelope's metadata (``control_interpolation`` is taken from the slices).
+
+    Raises:
+        EnvelopeError: slices on different grids, or a count that does not match ``climb_rates``.
+    """
+    if not slices or len(slices) != len(climb_rates):
+        raise EnvelopeError(f"{len(slices)} slices for {len(climb_rates)} climb rates")
+    first = slices[0].arrays
+    for other in slices[1:]:
+        arrays = other.arrays
+        if set(arrays) != set(first) or any(
+            not np.array_equal(arrays[axis], first[axis]) for axis in ("heights", "speeds")
+        ):
+            raise EnvelopeError("climb slices must share their grid and arrays")
+    stacked: dict[str, np.ndarray] = {"climb_rates": np.asarray(climb_rates, float)}
+    for name in first:
+        if name in {"heights", "speeds"}:
+            stacked[name] = first[name]
+        elif name.startswith("boundary"):
+            stacked[name] = np.concatenate([envelope.arrays[name] for envelope in slices])
+        else:
+            stacked[name] = np.stack([envelope.arrays[name] for envelope in slices])
+    stacked["boundary_slice"] = np.concatenate(
+        [np.full(envelope.boundary.shape[0], index, np.int16) for index, envelope in enumerate(slices)]
+    )
+    interpolation = next((e.metadata.get("control_interpolation") for e in slices if e.metadata.get(
+        "control_interpolation")), "")  # fmt: skip
+    return Envelope(stacked, dict(metadata, control_interpolation=interpolation))
 
 
 def settings_differences(stored: dict[str, Any], settings: PlannerSettings) -> list[str]:
@@ -554,10 +735,17 @@ def read_envelope_file(path: str | os.PathLike[str], allow_partial: bool = False
         raise EnvelopeError(f"envelope file {str(source)!r} is corrupt: its content does not match its checksum")
     if not isinstance(metadata, dict) or metadata.get("format") != FORMAT_NAME:
         raise EnvelopeError(f"{str(source)!r} is not a {FORMAT_NAME} file")
-    if int(metadata.get("format_version", -1)) != FORMAT_VERSION:
+    version = metadata.get("format_version")
+    if not isinstance(version, int) or version not in _READABLE_VERSIONS:
         raise EnvelopeError(
-            f"envelope file {str(source)!r} has format version {metadata.get('format_version')}, this software "
-            f"reads version {FORMAT_VERSION}; recompute it"
+            f"envelope file {str(source)!r} has format version {version}, this software reads versions "
+            f"{', '.join(str(v) for v in _READABLE_VERSIONS)}; recompute it"
+        )
+    if _READABLE_VERSIONS[version] != ("climb_rates" in contents):
+        kind = "3-D" if _READABLE_VERSIONS[version] else "2-D"
+        raise EnvelopeError(
+            f"envelope file {str(source)!r} is a format version {version} ({kind}) file without "
+            f"the matching climb-rate axis"
         )
     try:
         envelope = Envelope(contents, metadata)

@@ -15,6 +15,11 @@ aircraft only while the aircraft is in such a state, within tolerances:
   failure, and this module does not yet check it: such envelopes are outside their domain unless the power
   is within ``power_tolerance`` of trim (checked when given).
 
+A **3-D** envelope (a climb-rate axis, ``helireach envelope compute --climb-rates-fpm``) covers its climb-rate
+range exactly, from its lowest to its highest slice, with no tolerance beyond the ends (between slices the
+query interpolates conservatively); a 2-D envelope, or one with a single slice, covers its climb rate
+± ``climb_rate_tolerance`` (:meth:`ValidityDomain.climb_rate_range`).
+
 The tolerances are stored in the envelope file's metadata (``validity_domain``) by ``helireach envelope
 compute``; a file without them (made before they existed) gets these defaults.
 """
@@ -72,6 +77,12 @@ class ValidityDomain:
         if not self.climb_rates or not all(math.isfinite(rate) for rate in self.climb_rates):
             raise ValueError(f"climb_rates must be finite numbers, got {self.climb_rates!r}")
 
+    def climb_rate_range(self) -> tuple[float, float]:
+        """(lowest, highest) climb rate covered, m/s: the slices' range, or one slice ± the tolerance."""
+        if len(self.climb_rates) == 1:
+            return self.climb_rates[0] - self.climb_rate_tolerance, self.climb_rates[0] + self.climb_rate_tolerance
+        return min(self.climb_rates), max(self.climb_rates)
+
     @classmethod
     def from_metadata(cls, metadata: Mapping[str, Any]) -> ValidityDomain:
         """The domain recorded in an envelope's metadata, or the defaults for a file that records none."""
@@ -112,7 +123,7 @@ class ValidityDomain:
         """
         reasons: list[str] = []
         known = True
-        low, high = min(self.climb_rates) - self.climb_rate_tolerance, max(self.climb_rates) + self.climb_rate_tolerance
+        low, high = self.climb_rate_range()
         if not math.isfinite(climb_rate) or not low <= climb_rate <= high:
             reasons.append(
                 f"climb rate {climb_rate / _FPM:+.0f} ft/min outside {low / _FPM:+.0f}…{high / _FPM:+.0f} ft/min"

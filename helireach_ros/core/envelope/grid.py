@@ -14,8 +14,6 @@ from helireach_ros.core.units import FT, LBF
 __all__ = ["condition_file_name", "parse_list", "parse_range"]
 
 
-
-
 def parse_range(text: str, unit: float = 1.0, name: str = "range") -> tuple[float, ...]:
     """Parses ``start:stop:count`` (inclusive, evenly spaced) into SI values (× ``unit``).
 

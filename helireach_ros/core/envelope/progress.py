@@ -13,7 +13,6 @@ __all__ = ["NullProgress", "Progress"]
 log = logging.getLogger(__name__)
 
 
-
 class Progress:
     """Cells done, rate and ETA: a redrawn bar on an interactive terminal, else a log line every ~10 %/10 s."""
 

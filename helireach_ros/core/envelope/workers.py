@@ -71,12 +71,12 @@ class _ProcessExecutor:
 class _DaskExecutor:
     """Tasks on a Dask distributed cluster (workers need helireach_ros installed)."""
 
-    def __init__(self, address: str, timeout_s: float = 30.0) -> None:
+    def __init__(self, address: str, timeout_s: float = 30.0, description: str | None = None) -> None:
         from distributed import Client
 
         self._client = Client(address, timeout=timeout_s, set_as_default=False)
         self.workers = max(1, sum(self._client.nthreads().values()))
-        self.description = f"Dask scheduler {address} ({self.workers} worker threads)"
+        self.description = f"{description or f'Dask scheduler {address}'} ({self.workers} worker threads)"
         self._futures: list[Any] = []
 
     def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
@@ -96,14 +96,45 @@ class _DaskExecutor:
         self._client.close()
 
 
-def make_executor(workers: int | None = None, scheduler: str | None = None):
-    """The executor for ``--workers N`` (default: every core) or ``--scheduler ADDRESS`` (Dask).
+class _LocalDaskExecutor(_DaskExecutor):
+    """A Dask ``distributed.LocalCluster`` of ``workers`` single-threaded worker processes, started and stopped here.
+
+    One thread per worker: an IPOPT solve holds the GIL for most of its time, so threads in one process
+    would queue behind each other.
+    """
+
+    def __init__(self, workers: int) -> None:
+        from distributed import LocalCluster
+
+        self._cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=1, processes=True, host="127.0.0.1", dashboard_address=None
+        )
+        try:
+            super().__init__(self._cluster.scheduler_address, description=f"Dask LocalCluster, {workers} processes")
+        except BaseException:
+            self._cluster.close()
+            raise
+
+    def close(self) -> None:
+        try:
+            super().close()
+        finally:
+            self._cluster.close()
+
+
+def make_executor(workers: int | None = None, scheduler: str | None = None, dask_local: int | None = None):
+    """The executor for ``--workers N`` (default: every core), ``--scheduler ADDRESS`` (Dask) or
+    ``--dask-local N`` (a Dask LocalCluster of N worker processes on this machine).
 
     Returns:
         An object with ``map_unordered(function, tasks)``, ``abort()``, ``close()``, ``description``.
     """
     if scheduler:
         return _DaskExecutor(scheduler)
+    if dask_local is not None:
+        if dask_local < 1:
+            raise ValueError(f"--dask-local needs >= 1 worker, got {dask_local}")
+        return _LocalDaskExecutor(dask_local)
     count = workers if workers is not None else (os.cpu_count() or 1)
     if count < 1:
         raise ValueError(f"workers must be >= 1, got {count}")

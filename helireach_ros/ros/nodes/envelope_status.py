@@ -5,8 +5,9 @@ Gathers the evidence and publishes the decision of :func:`helireach_ros.core.saf
 when the verdict changes and every ``publish_period``. The evidence:
 
 - the **envelope** (parameter ``envelope_file``; empty = the shipped one): its conservative answer at the
-  canonical state (``/helireach/state``, :meth:`helireach_ros.core.envelope.data.Envelope.query`), which holds
-  only inside the envelope's validity domain (:mod:`helireach_ros.core.envelope.domain`: level trim at nominal
+  canonical state (``/helireach/state``, :meth:`helireach_ros.core.envelope.data.Envelope.query`; a 3-D
+  envelope at the measured climb rate), which holds only inside the envelope's validity domain
+  (:mod:`helireach_ros.core.envelope.domain`: level trim — a 3-D envelope: its climb-rate range — at nominal
   rotor speed, within tolerances; the rotor speed from ``/helireach/rotor_state``);
 - the **live verdict** (``/helireach/live_reachability``, from the planner): the landing NLP solved and
   replayed from the measured state, evidence while its state is at most ``live_max_age`` old;
@@ -73,7 +74,7 @@ class SafetyVerdict:
 def envelope_domain(envelope: Any) -> tuple[ValidityDomain, float]:
     """(validity domain, Ω₀ of its airframe) of a loaded envelope: read once, not at every state message."""
     metadata = envelope.metadata
-    return ValidityDomain.from_metadata(metadata), float(metadata["airframe"]["nominal_rotor_speed"])
+    return envelope.validity_domain, float(metadata["airframe"]["nominal_rotor_speed"])
 
 
 def evaluate_safety(
@@ -134,7 +135,8 @@ def evaluate_safety(
         height, forward_speed = max(reading.height, 0.0), reading.forward_speed
     evidence = None
     if envelope is not None and not state_problem:
-        query = envelope.query(height, forward_speed)
+        # a 3-D envelope answers at the measured climb rate; a 2-D one at level trim, its domain checks the rest
+        query = envelope.query(height, forward_speed, reading.climb_rate if envelope.is_3d else 0.0)
         validity_domain, omega0 = envelope_domain(envelope)
         domain = validity_domain.check(reading.climb_rate, rotor_speed, omega0, power_fraction=envelope.power_fraction)
         evidence = EnvelopeEvidence(query.status, query.margin, query.by_interpolation, domain)
