@@ -89,3 +89,21 @@ def test_a_bad_state_file_is_a_clear_error(tmp_path, document, message):
     path.write_text(document)
     result = _helireach("plan", "--state-json", str(path))
     assert result.returncode == 2 and message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_default_plan_is_flyable_and_the_delay_and_limits_are_reported():
+    result = _helireach("plan", "--height-ft", "500", "--speed-kt", "75", "--reaction-delay-s", "0.3", "--json")
+    assert result.returncode == 0, result.stderr
+    summary = json.loads(result.stdout)
+    assert summary["method"] == "flyable" and summary["reaction_delay_s"] == 0.3
+    flyability = summary["flyability"]
+    assert flyability["within_limits"] and flyability["violations"] == []
+    assert -12.0 <= flyability["touchdown_pitch_deg"] <= 5.0  # theta, positive nose down: the touchdown window
+    assert (
+        flyability["max_pitch_rate_deg_s"] <= 20.0 * (1 + 1e-6) and flyability["max_nose_up_pitch_deg"] <= 25.0 + 1e-6
+    )
+    verified = json.loads(
+        _helireach("plan", "--height-ft", "500", "--speed-kt", "75", "--method", "verified", "--json").stdout
+    )
+    assert not verified["flyability"]["within_limits"]  # the paper-limit plan: steps, 40 deg, ends above the ground
+    assert "no ground contact" in verified["flyability"]["violations"]

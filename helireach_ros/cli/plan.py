@@ -45,7 +45,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the state at the failure in SI (descent_rate, forward_speed, rotor_speed, height[, distance, "
         "engine_power]) instead of the flight options; '-' reads standard input",
     )
-    parser.add_argument("--method", choices=("verified", "paper"), default=None, help="transcription (default: config)")
+    parser.add_argument(
+        "--method", choices=("flyable", "verified", "paper"), default=None, help="transcription (default: config)"
+    )
+    parser.add_argument(
+        "--reaction-delay-s",
+        type=float,
+        default=None,
+        help="s the pre-failure trim controls are held before the plan starts (default: config, 0)",
+    )
     parser.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
     parser.add_argument("--weight-lb", type=float, default=None, help="override the gross weight [lbf]")
     parser.add_argument("--density-altitude-ft", type=float, default=None, help="override the density altitude [ft]")
@@ -66,7 +74,9 @@ def run_plan(arguments: argparse.Namespace) -> int:
             gross_weight=None if arguments.weight_lb is None else arguments.weight_lb * LBF,
             density_altitude=None if arguments.density_altitude_ft is None else arguments.density_altitude_ft * FT,
         )
-        settings = load_settings(arguments.settings, method=arguments.method)
+        settings = load_settings(
+            arguments.settings, method=arguments.method, reaction_delay_s=arguments.reaction_delay_s
+        )
         state = _state(arguments, airframe)
         plan = plan_landing(state, airframe, settings)
     except (ConfigError, ValueError) as error:
@@ -92,11 +102,31 @@ def run_plan(arguments: argparse.Namespace) -> int:
             f"  value {plan.value:+.3f} (<= 0 is safe), replayed value {plan.replay.value:+.3f}\n"
             f"  time to land {plan.time_to_land:.2f} s; replayed touchdown {touchdown[0] / FT:.1f} ft/s, "
             f"{touchdown[1] / KT:.1f} kt, rotor {100 * touchdown[2] / airframe.nominal_rotor_speed:.0f} %\n"
-            f"  IPOPT {plan.solver.status}, {plan.solver.iterations} iterations, {plan.solver.solve_time_ms:.0f} ms"
+            f"  IPOPT {plan.solver.status}, {plan.solver.iterations} iterations, {plan.solver.solve_time_ms:.0f} ms\n"
+            f"  {_flyability_line(plan)}"
         )
         if arguments.plot:
             print(f"  figure: {arguments.plot}")
     return 0 if plan.safe else 1
+
+
+def _flyability_line(plan) -> str:
+    """What the plan asks of the aircraft, and the flyability limits it breaks."""
+    report = plan.replay.flyability
+    touchdown = (
+        "no ground contact"
+        if report.touchdown_pitch is None
+        else f"touchdown attitude {-math.degrees(report.touchdown_pitch):+.1f} deg nose-up"
+    )
+    text = (
+        f"flyability: pitch rate up to {math.degrees(report.max_pitch_rate):.1f} deg/s, nose up to "
+        f"{math.degrees(report.max_nose_up_pitch):.1f} deg, {touchdown}"
+    )
+    if plan.reaction_delay_s > 0.0:
+        text += f", after a {plan.reaction_delay_s:g} s reaction delay"
+    if report.violations:
+        text += " -- breaks: " + "; ".join(report.violations)
+    return text
 
 
 def _state(arguments: argparse.Namespace, airframe):

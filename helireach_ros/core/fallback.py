@@ -56,7 +56,7 @@ def fallback_plan(
         settings: the planner's settings (for the longest landing time).
         envelope: a loaded :class:`~helireach_ros.core.envelope.data.Envelope` matching the planner, or None.
     """
-    stored = envelope.nearest_plan(state[3], state[1]) if envelope is not None else None
+    stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope is not None else None
     if stored is not None:
         return FallbackPlan(
             "envelope_plan",

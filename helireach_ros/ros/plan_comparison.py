@@ -133,7 +133,7 @@ def compare_logged_plans(
     comparisons = []
     for values, trajectory in pairs:
         state = np.array([float(values[key]) for key in _STATE_KEYS])
-        stored = envelope.nearest_plan(state[3], state[1]) if envelope is not None else None
+        stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope is not None else None
         plan = planner.plan(state, stored.warm_start if stored is not None else None)
         rerun_times, rerun_values = piecewise_linear_controls(
             plan.control_times, plan.control_values, plan.control_interpolation

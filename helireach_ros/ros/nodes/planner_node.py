@@ -297,7 +297,11 @@ class LandingPlannerNode(Node):
             self.planner = get_planner(self.airframe, self.settings)
         if warm_up and self._pool is None:
             state = initial_state_after_failure(self.airframe, 500.0 * FT, 75.0 * KT)
-            stored = self.envelope.nearest_plan(state.height, state.forward_speed) if self.envelope else None
+            stored = (
+                self.envelope.nearest_plan(state.height, state.forward_speed, -state.descent_rate)
+                if self.envelope
+                else None
+            )
             warm_up_started = time.perf_counter()
             self.planner.plan(state, stored.warm_start if stored else None)
             self.warm_up_ms = 1e3 * (time.perf_counter() - warm_up_started)
@@ -487,7 +491,7 @@ class LandingPlannerNode(Node):
                 return
             # The envelope's nearest plan (~1 ms to find) only when there is no previous live solution to start from.
             needs_fallback = self.envelope is not None and not self._live.warm_start_applies(state)
-            stored = self.envelope.nearest_plan(state[3], state[1]) if needs_fallback else None
+            stored = self.envelope.nearest_plan(state[3], state[1], -state[0]) if needs_fallback else None
             prepared = self._live.prepare(state, stamp_ns, now_ns, stored.warm_start if stored is not None else None)
             if prepared is None:
                 return  # the state is older than live_max_state_age
@@ -623,7 +627,7 @@ class LandingPlannerNode(Node):
             self._publish_status_only(failure, "no valid vehicle state at the failure: waiting for one")
             return
         state, stamp_ns, frame, rotor_source = current
-        stored = self.envelope.nearest_plan(state[3], state[1]) if self.envelope is not None else None
+        stored = self.envelope.nearest_plan(state[3], state[1], -state[0]) if self.envelope is not None else None
         warm_start, source = (stored.warm_start, "envelope") if stored is not None else (None, "none")
         plan, error = self._solve(state, warm_start)
         if plan is None or not plan.solver.success:
