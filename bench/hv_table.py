@@ -8,6 +8,7 @@ Per file (computed with ``helireach envelope compute``; the command is in each f
 * hover band: the lowest and highest not-safe heights at 0 kt above the ground row (ft);
 * knee: the low-speed avoid region is the 4-connected set of not-safe nodes that holds the hover band's top;
   its knee is the largest speed at which that region still reaches half the band's top height (kt, at ft);
+* not safe at the top speed: the not-safe heights in the fastest column (a low-level band at speed);
 * separate high-speed region: not-safe nodes above the ground row, faster than the knee, that are *not* part of
   the low-speed region (the flight-manual shape: an avoid region at low height and high speed of its own).
 """
@@ -56,7 +57,7 @@ def shape_row(path: str) -> dict[str, str]:
            "unsafe share": f"{100.0 * not_safe[1:].mean():.1f} %"}  # fmt: skip
     hover = np.flatnonzero(not_safe[:, 0])
     if hover.size == 0:
-        return {**row, "hover band": "none", "knee": "none", "separate high-speed region": "none"}
+        return {**row, "hover band": "none", "knee": "none", "top speed": "-", "separate high-speed region": "none"}
     row["hover band"] = f"{heights_ft[hover[0]]:.0f}-{heights_ft[hover[-1]]:.0f} ft"
     low_speed = _component(not_safe, (int(hover[-1]), 0))
     half = heights_ft[hover[-1]] / 2.0
@@ -64,21 +65,21 @@ def shape_row(path: str) -> dict[str, str]:
     knee_column = max(reaching)
     knee_height = heights_ft[np.flatnonzero(low_speed[:, knee_column])].max()
     row["knee"] = f"{speeds_kt[knee_column]:.0f} kt at {knee_height:.0f} ft"
+    top_speed = np.flatnonzero(not_safe[:, -1])
+    row["top speed"] = row[f"not safe at {speeds_kt[-1]:.0f} kt"] = (
+        f"{heights_ft[top_speed[0]]:.0f}-{heights_ft[top_speed[-1]]:.0f} ft" if top_speed.size else "none"
+    )
     fast = np.zeros_like(not_safe)
     fast[:, knee_column + 1 :] = True
     separate = not_safe & fast & ~low_speed
-    attached = not_safe & fast & low_speed
     if separate.any():
         rows, columns = np.nonzero(separate)
         row["separate high-speed region"] = (
             f"yes: {separate.sum()} nodes, {heights_ft[rows.min()]:.0f}-{heights_ft[rows.max()]:.0f} ft, "
             f"{speeds_kt[columns.min()]:.0f}-{speeds_kt[columns.max()]:.0f} kt"
         )
-    elif attached.any():
-        rows, _ = np.nonzero(attached)
-        row["separate high-speed region"] = (
-            f"no: a low-level band up to {heights_ft[rows.max()]:.0f} ft joins the low-speed region"
-        )
+    elif top_speed.size:
+        row["separate high-speed region"] = "no: the low-level band at speed joins the low-speed region"
     else:
         row["separate high-speed region"] = "no"
     return row
@@ -91,7 +92,8 @@ def main() -> int:
     print(f"command: {' '.join(sys.argv)}")
     print(f"load average (1/5/15 min): {loadavg_text()}")
     rows = [shape_row(path) for path in arguments.files]
-    columns = ["setting", "safe", "unsafe share", "hover band", "knee", "separate high-speed region", "file"]
+    top = next((key for key in rows[0] if key.startswith("not safe at")), "top speed")
+    columns = ["setting", "safe", "unsafe share", "hover band", "knee", top, "separate high-speed region", "file"]
     print("| " + " | ".join(columns) + " |")
     print("|" + "---|" * len(columns))
     for row in rows:
