@@ -500,8 +500,10 @@ def near(value: float, expected: float, tolerance: float = 0.05) -> bool:
 # ------------------------------------------------------------------------------------------------------------
 
 
-def expected_margins(envelope: Any, height: float, speed: float) -> dict[str, str]:
-    """What the banner's two margins must read for a state (from the envelope's nodes, as the page's rule)."""
+def expected_margins(envelope: Any, height: float, speed: float, climb: float = 0.0) -> dict[str, str]:
+    """What the banner's two margins must read for a state (from the nodes of the envelope's climb slice nearest
+    the state's climb rate, as the page's rule)."""
+    envelope = envelope.slice(envelope.nearest_slice(climb))
     margins = axis_margins(envelope.heights, envelope.speeds, np.asarray(envelope.status) == "safe", height, speed)
     texts = {}
     for axis, unit, words in (("vertical", FT, ("ABOVE", "BELOW")), ("horizontal", KT, ("FASTER", "SLOWER"))):
@@ -534,21 +536,21 @@ def test_page_follows_status_state_and_plan(ros: RosHarness, browser: Browser, t
         # no episode heard: the H-V status is shown, and the banner says what is missing
         assert "NO FAILURE-EPISODE STATUS" in shown["detail"]
         shown = await page.wait_for(
-            "window.helireach.margins", lambda m: m == expected_margins(envelope, *cruise[:2]), "the margins"
+            "window.helireach.margins", lambda m: m == expected_margins(envelope, *cruise), "the margins"
         )
         first = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 75) and near(m["heightFt"], 500), "marker")
 
         vehicle.set(slow, status_message(DiagnosticStatus.WARN, "near the boundary", *slow[:2], 12.0, envelope_id))
         shown = await page.banner("caution", "CAUTION")
         assert shown["word"] == "CAUTION"
-        await page.wait_for("window.helireach.margins", lambda m: m == expected_margins(envelope, *slow[:2]), "margins")
+        await page.wait_for("window.helireach.margins", lambda m: m == expected_margins(envelope, *slow), "margins")
         second = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 40) and near(m["heightFt"], 250), "marker")
         assert second["x"] < first["x"] and second["y"] > first["y"]  # slower: left; lower: down the canvas
 
         vehicle.set(low, status_message(DiagnosticStatus.ERROR, "in the unsafe set", *low[:2], -35.0, envelope_id))
         shown = await page.banner("avoid", "AVOID")
         assert shown["word"] == "AVOID"
-        await page.wait_for("window.helireach.margins", lambda m: m == expected_margins(envelope, *low[:2]), "margins")
+        await page.wait_for("window.helireach.margins", lambda m: m == expected_margins(envelope, *low), "margins")
         third = await page.wait_for(MARKER, lambda m: near(m["speedKt"], 20) and near(m["heightFt"], 100), "marker")
         assert third["x"] < second["x"] and third["y"] > second["y"]
         save_artifact(tmp_path, "display-avoid.png", await page.screenshot())

@@ -1,5 +1,6 @@
-"""The shipped uh60a_class total-power-loss envelope: it loads for today's airframe and settings, has the
-expected H-V shape, every safe node is verified, and a sample of nodes recomputes to the stored answers.
+"""The shipped uh60a_class total-power-loss envelope (3-D: seven climb slices): it loads for today's airframe and
+settings, has the expected H-V shape, every safe node is verified, and a sample of nodes recomputes to the stored
+answers.
 
 If the airframe file or config/planner.yaml changes, the loading test fails on purpose: recompute the file
 with the command recorded in its metadata.
@@ -17,30 +18,59 @@ from helireach_ros.core.planner import get_planner
 from helireach_ros.core.settings import load_settings
 from helireach_ros.core.units import FT, KT
 
+FPM = FT / 60.0
+
 
 @pytest.fixture(scope="module")
-def shipped():
+def shipped_3d():
     """The shipped file, loaded with today's airframe and planner settings (a mismatch fails here)."""
     return load_envelope(
         default_envelope_path(), airframe=load_airframe("uh60a_class"), settings=load_settings(), power_fraction=0.0
     )
 
 
-def test_shipped_file_is_small_and_made_by_the_cli(shipped):
-    assert default_envelope_path().stat().st_size <= 10 * 1024 * 1024
-    command = shipped.metadata["command"]
+@pytest.fixture(scope="module")
+def shipped(shipped_3d):
+    """Its level-flight slice: the classic H-V diagram."""
+    return shipped_3d.slice(shipped_3d.nearest_slice(0.0))
+
+
+def test_shipped_file_is_compact_3d_and_made_by_the_cli(shipped_3d):
+    nodes = shipped_3d.status.size
+    assert default_envelope_path().stat().st_size <= 4 * 1024 * nodes  # ~3.8 KB per node of stored plans
+    command = shipped_3d.metadata["command"]
     assert command.startswith("helireach envelope compute") and "--airframe uh60a_class" in command
-    assert shipped.complete
-    assert shipped.status.shape == (41, 25)
-    assert np.allclose(shipped.heights[[0, -1]] / FT, [0, 800]) and np.allclose(shipped.speeds[[0, -1]] / KT, [0, 120])
+    assert "--dask-local" in command  # computed on a Dask LocalCluster, as issue 10 asks
+    assert shipped_3d.complete and shipped_3d.is_3d
+    assert shipped_3d.status.shape == (7, 41, 25)
+    assert np.allclose(shipped_3d.climb_rates / FPM, [-2000, -1500, -1000, -500, 0, 750, 1500])
+    assert np.allclose(shipped_3d.heights[[0, -1]] / FT, [0, 800])
+    assert np.allclose(shipped_3d.speeds[[0, -1]] / KT, [0, 120])
 
 
-def test_every_safe_node_is_verified_and_values_match_statuses(shipped):
-    safe = shipped.status == "safe"
-    assert np.all(shipped.arrays["verified"][safe])
-    assert np.all(shipped.value[safe] <= 0.0)
-    assert np.all(shipped.value[shipped.status == "unsafe"] > 0.0)
-    assert not np.any(shipped.status == "failed")
+def test_every_safe_node_is_verified_and_values_match_statuses(shipped_3d):
+    safe = shipped_3d.status == "safe"
+    assert np.all(shipped_3d.arrays["verified"][safe])
+    assert np.all(shipped_3d.value[safe] <= 0.0)
+    assert np.all(shipped_3d.value[shipped_3d.status == "unsafe"] > 0.0)
+    # Solver failures (never safe): none in level flight; in descents only near the ground (h <= 40 ft)
+    failed = shipped_3d.status == "failed"
+    level = shipped_3d.nearest_slice(0.0)
+    assert not np.any(failed[level])
+    heights_ft = shipped_3d.heights / FT
+    for index in np.flatnonzero(shipped_3d.climb_rates < 0.0):
+        assert np.all(heights_ft[np.nonzero(failed[index])[0]] <= 40.0)
+
+
+def test_every_slice_has_the_hover_band_and_is_safe_at_cruise_height(shipped_3d):
+    """Across the slices: the hover band exists at every climb rate, and 500-800 ft at 60-100 kt (the heart of the
+    safe region) is safe at every climb rate."""
+    heights_ft, speeds_kt = shipped_3d.heights / FT, shipped_3d.speeds / KT
+    cruise = (heights_ft >= 500) & (heights_ft <= 800), (speeds_kt >= 60) & (speeds_kt <= 100)
+    for index in range(len(shipped_3d.climb_rates)):
+        status = shipped_3d.status[index]
+        assert np.any(status[:, 0] == "unsafe"), index
+        assert np.all(status[cruise[0]][:, cruise[1]] == "safe"), index
 
 
 def test_hover_has_a_low_speed_unsafe_band_between_tens_and_hundreds_of_feet(shipped):
@@ -107,3 +137,24 @@ def test_a_sample_of_nodes_recomputes_to_the_stored_answers(shipped):
         plan = planner.plan(state, warm_start=start)
         assert plan.status == shipped.status[row, column], (row, column)
         assert plan.value == pytest.approx(shipped.value[row, column], abs=1e-4), (row, column)
+
+
+def test_a_descent_slice_node_recomputes_to_its_stored_answer(shipped_3d):
+    airframe = load_airframe("uh60a_class")
+    planner = get_planner(airframe, load_settings())
+    index = int(np.flatnonzero(np.isclose(shipped_3d.climb_rates / FPM, -1000))[0])
+    descent = shipped_3d.slice(index)
+    checked, warm = descent.arrays["cold_checked"], descent.arrays["warm_started"]
+    row, column = (int(i) for i in np.argwhere(checked & ~warm & (descent.status == "safe"))[0])
+    state = initial_state_after_failure(
+        airframe, descent.heights[row], descent.speeds[column], climb_rate=float(shipped_3d.climb_rates[index])
+    )
+    plan = planner.plan(state)
+    assert plan.status == "safe" and plan.value == pytest.approx(descent.value[row, column], abs=1e-4)
+
+
+def test_the_3d_file_answers_at_the_climb_rate_and_not_beyond_its_axis(shipped_3d):
+    assert shipped_3d.query(700 * FT, 100 * KT, climb_rate=-1200 * FPM).status == "safe"  # between two slices
+    assert shipped_3d.query(200 * FT, 5 * KT, climb_rate=-700 * FPM).status == "unsafe"
+    assert shipped_3d.query(700 * FT, 100 * KT, climb_rate=-2500 * FPM).status == "outside"
+    assert shipped_3d.query(700 * FT, 100 * KT, climb_rate=2000 * FPM).status == "outside"

@@ -7,11 +7,13 @@ The live verdicts themselves are tested in ``test_live_planner_ros.py``.
 
 from __future__ import annotations
 
+import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 from test_ros_nodes import OMEGA0, Harness, level_is
 
+from helireach_ros.core.envelope.data import default_envelope_path, load_envelope, save_envelope
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
@@ -21,6 +23,14 @@ from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 FPM = FT / 60.0
 
 
+@pytest.fixture(scope="module")
+def level_trim_envelope(tmp_path_factory) -> str:
+    """The shipped 3-D envelope's level-flight slice as a 2-D file: what a level-trim H-V envelope says."""
+    shipped = load_envelope(default_envelope_path())
+    level = shipped.slice(shipped.nearest_slice(0.0))
+    return str(save_envelope(level, tmp_path_factory.mktemp("envelope") / "level_trim.npz"))
+
+
 def test_outside_the_envelope_domain_without_a_live_verdict_the_status_is_stale(context: Context) -> None:
     harness = Harness(context, VehicleMonitor(context=context), EnvelopeStatusNode(context=context))
     statuses = harness.listen(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS)
@@ -28,7 +38,7 @@ def test_outside_the_envelope_domain_without_a_live_verdict_the_status_is_stale(
         # Level flight at nominal rotor speed: inside the domain, the envelope answers.
         assert harness.keep_publishing(500 * FT, 75 * KT, until=level_is(statuses, DiagnosticStatus.OK))
         assert rm.status_values(statuses[-1])["evidence"] == "envelope"
-        # 20 ft, 90 kt is safe from level trim; in a 2,000 ft/min descent the envelope does not speak for it.
+        # 200 ft, 100 kt: its descent slices stop at -2,000 ft/min; at -2,500 the envelope does not speak for it.
         assert harness.keep_publishing(
             200 * FT, 100 * KT, climb_rate=-2500 * FPM, until=level_is(statuses, DiagnosticStatus.STALE)
         )
@@ -45,12 +55,17 @@ def test_outside_the_envelope_domain_without_a_live_verdict_the_status_is_stale(
         harness.close()
 
 
-def test_with_the_live_planner_a_descent_the_envelope_calls_safe_is_an_error(context: Context) -> None:
+def test_with_the_live_planner_a_descent_the_envelope_calls_safe_is_an_error(
+    context: Context, level_trim_envelope: str
+) -> None:
     planner = LandingPlannerNode(
         context=context,
         parameter_overrides=[Parameter("solver_workers", value=0), Parameter("replan_period", value=0.0)],
     )
-    harness = Harness(context, VehicleMonitor(context=context), EnvelopeStatusNode(context=context), planner)
+    status_node = EnvelopeStatusNode(
+        context=context, parameter_overrides=[Parameter("envelope_file", value=level_trim_envelope)]
+    )
+    harness = Harness(context, VehicleMonitor(context=context), status_node, planner)
     statuses = harness.listen(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS)
     try:
         assert harness.keep_publishing(
@@ -61,8 +76,8 @@ def test_with_the_live_planner_a_descent_the_envelope_calls_safe_is_an_error(con
                 and rm.status_values(statuses[-1]).get("evidence") == "envelope+live"
             ),
         ), statuses[-1].message
-        # 20 ft, 90 kt, 2,000 ft/min down: outside the envelope's domain (it would say safe); the live verdict says
-        # no safe landing exists from there.
+        # 200 ft, 100 kt, 2,500 ft/min down: outside the level-trim envelope's domain (its lookup says safe); the
+        # live verdict says no safe landing exists from there.
         assert harness.keep_publishing(
             200 * FT, 100 * KT, climb_rate=-2500 * FPM, until=level_is(statuses, DiagnosticStatus.ERROR)
         ), statuses[-1].message
