@@ -66,6 +66,7 @@ class DemoResult:
         self.figures: list[Path] = []
         self.scenario: Any = None
         self.limits: Any = None
+        self.flyability: Any = None
         self.nominal_rotor_speed = float("nan")
 
     @property
@@ -111,6 +112,7 @@ def run_demo(
     assert sim is not None
     result.log_path, result.scenario = system.log_path, sim.scenario
     result.limits = sim.vehicle.airframe.limits
+    result.flyability = sim.vehicle.airframe.flyability
     result.nominal_rotor_speed = sim.vehicle.nominal_airframe.nominal_rotor_speed
     for node in system.extra:
         if hasattr(node, "url"):
@@ -222,8 +224,9 @@ def summary(result: DemoResult) -> str:
             f"{limits.max_descent_rate / FT:.0f}), {touchdown.forward_speed / KT:.1f} kt (limit "
             f"{limits.max_forward_speed / KT:.0f}), rotor {100 * touchdown.rotor_speed / omega0:.0f} % (in flight "
             f"{100 * touchdown.min_rotor_speed / omega0:.1f}-{100 * touchdown.max_rotor_speed / omega0:.1f} %, limits "
-            f"{100 * limits.min_rotor_speed_ratio:.0f}-{100 * limits.max_rotor_speed_ratio:.0f} %), "
-            f"{touchdown.time_after_failure:.1f} s after the failure"
+            f"{100 * limits.min_rotor_speed_ratio:.0f}-{100 * limits.max_rotor_speed_ratio:.0f} %, "
+            f"{100 * result.flyability.touchdown_min_rotor_speed_ratio:.0f} % below "
+            f"{result.flyability.commit_height / FT:.0f} ft), {touchdown.time_after_failure:.1f} s after the failure"
         )
     verdict = (
         "SAFE: landed within limits"

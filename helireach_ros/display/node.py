@@ -261,6 +261,7 @@ class CockpitDisplay(Node):
             path = self._envelope_file or str(envelope_module.default_envelope_path())
             envelope = envelope_module.load_envelope(path)
             section = envelope_section(envelope.slice(envelope.nearest_slice(0.0)))  # the level-flight diagram
+            section["envelope_id"] = str(envelope.envelope_id)  # the file's, as the status node reports it
         except Exception as error:  # missing module, missing/corrupt file: the page shows NO DATA, node runs on
             reason = f"{type(error).__name__}: {error}"
             if str(path) not in reason:
