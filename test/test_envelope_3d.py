@@ -79,14 +79,19 @@ def test_a_2d_file_still_loads_and_queries_as_before(tmp_path):
     assert flat.query(150 * FT, 15 * KT, -200 * FPM).status == "outside"  # beyond ±0.5 m/s of level
 
 
-@pytest.mark.skipif(read_envelope_file(default_envelope_path()).is_3d, reason="the shipped envelope is a 3-D file now")
-def test_the_shipped_2d_file_made_before_the_climb_axis_still_loads():
+def test_a_2d_file_still_loads_and_queries_level_flight_only(tmp_path):
+    """A level slice of the shipped 3-D file written as a 2-D file (format version 1, the layout of every file
+    before the climb axis) loads, answers as that slice, and says nothing beyond its level-trim tolerance."""
     shipped = read_envelope_file(default_envelope_path())
-    assert shipped.metadata["format_version"] == FORMAT_VERSION and shipped.status.ndim == 2
+    level = shipped.slice(shipped.nearest_slice(0.0))
+    path = save_envelope(level, tmp_path / "level.npz")
+    flat = read_envelope_file(path)
+    assert flat.metadata["format_version"] == FORMAT_VERSION and flat.status.ndim == 2 and not flat.is_3d
     for height_ft, speed_kt in ((200, 5), (700, 100), (300, 40), (20, 90)):
-        level = shipped.query(height_ft * FT, speed_kt * KT)
-        assert shipped.query(height_ft * FT, speed_kt * KT, 50 * FPM) == level
-        assert shipped.query(height_ft * FT, speed_kt * KT, -200 * FPM).status == "outside"
+        answer = flat.query(height_ft * FT, speed_kt * KT)
+        assert answer.status == shipped.query(height_ft * FT, speed_kt * KT, 0.0).status
+        assert flat.query(height_ft * FT, speed_kt * KT, 50 * FPM) == answer
+        assert flat.query(height_ft * FT, speed_kt * KT, -200 * FPM).status == "outside"
 
 
 # --- 3-D queries (exact expectations) --------------------------------------------------------------------
