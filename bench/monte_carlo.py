@@ -2,6 +2,7 @@
 
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
+     [--estimate-weight]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -23,7 +24,9 @@ Prints, per margin setting: the success rate with its 95 % Wilson interval overa
 the touchdown descent-rate and forward-speed distributions, the rotor-speed range, the success rate in the
 lower and upper half of each range (what the failures lean on), each failure's seed;
 then (unless ``--no-weight-check``) the issue's acceptance case, an unknown +5 % weight from 500 ft / 75 kt,
-for a few latencies and noise seeds. Parallel over ``--workers`` local processes.
+for a few latencies and noise seeds. Parallel over ``--workers`` local processes. ``--estimate-weight``: the
+planner plans for the gross weight estimated from the engine power of the steady flight before the failure
+(:mod:`helireach_ros.core.estimation`), which also absorbs the drag and c_d errors into that weight.
 """
 
 from __future__ import annotations
@@ -130,9 +133,9 @@ def _context(uncertainty_file: str) -> tuple[Airframe, PlannerSettings, Uncertai
     return load_airframe("uh60a_class"), load_settings(None), load_uncertainty_set(uncertainty_file)
 
 
-def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int]) -> dict:
+def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int, bool]) -> dict:
     """One closed-loop landing (a worker process's job)."""
-    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed = task
+    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, estimate_weight = task
     airframe, settings, _ = _context(uncertainty_file)
     planner = get_planner(margin.planning_airframe(airframe), settings)
     scenario = Scenario(
@@ -140,7 +143,9 @@ def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int]
     )
     vehicle = model_vehicle(scenario, model, airframe, settings)  # judged against the true limits
     started = time.perf_counter()
-    result = fly_closed_loop(vehicle, planner, ClosedLoopSettings(latency=model.latency))
+    result = fly_closed_loop(
+        vehicle, planner, ClosedLoopSettings(latency=model.latency, estimate_weight=estimate_weight)
+    )
     report = result.touchdown
     omega0 = airframe.nominal_rotor_speed
     return {
@@ -223,6 +228,9 @@ def main() -> None:
     parser.add_argument("--margins", type=Margin.parse, nargs="+", default=[Margin(0.0, 0.0)], help="T/R ...")
     parser.add_argument("--uncertainty", default=DEFAULT_UNCERTAINTY_FILE)
     parser.add_argument("--no-weight-check", action="store_true", help="skip the +5 %% weight acceptance case")
+    parser.add_argument(
+        "--estimate-weight", action="store_true", help="plan for the weight estimated from the power before the failure"
+    )
     arguments = parser.parse_args()
     airframe, _, uncertainty = _context(arguments.uncertainty)
     states = initial_states()
@@ -241,7 +249,7 @@ def main() -> None:
         started = time.perf_counter()
         tasks = [
             (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed], uncertainty.sensor_noise,
-             noise_seeds[seed])
+             noise_seeds[seed], arguments.estimate_weight)
             for seed in seeds
         ]  # fmt: skip
         results = run_tasks(tasks, arguments.workers)
@@ -261,7 +269,9 @@ def weight_check(arguments: argparse.Namespace) -> None:
         for latency in WEIGHT_CHECK_LATENCIES:
             for seed in WEIGHT_CHECK_SEEDS:
                 model = PerturbedModel({"gross_weight": 0.05}, latency=latency, label="gross_weight+5%")
-                tasks.append((arguments.uncertainty, margin, 500.0, 75.0, model, demo.noise, seed))
+                tasks.append(
+                    (arguments.uncertainty, margin, 500.0, 75.0, model, demo.noise, seed, arguments.estimate_weight)
+                )
                 keys.append((margin, latency, seed))
     for (margin, latency, seed), r in zip(keys, run_tasks(tasks, arguments.workers), strict=True):
         verdict = "within limits" if r["within"] else f"OUTSIDE: {r['reason']}"

@@ -8,6 +8,10 @@ from the current measurement, warm-started from its previous plan, until the veh
 the measurement it starts from and reaches the vehicle ``latency`` seconds later (solve, transport),
 as a :class:`~helireach_ros.core.simulation.ControlSchedule`; until then the vehicle flies the previous one.
 
+With ``estimate_weight``, the planner first estimates today's gross weight from the steady flight before the
+failure (:func:`~helireach_ros.core.estimation.estimate_gross_weight`: the weight whose trim power is the
+measured engine power) and plans for it (issue 12, "estimation where it pays").
+
 Unlike the real-time ROS system this is deterministic (seeded noise, fixed latency), so it measures
 what the closed loop tolerates: ``bench/closed_loop_latency.py`` sweeps the latency.
 """
@@ -19,12 +23,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from helireach_ros.core.estimation import estimate_gross_weight
 from helireach_ros.core.model import clip_rotor_speed_noise, state_from_sensors
-from helireach_ros.core.planner import LandingPlan, LandingPlanner
+from helireach_ros.core.planner import LandingPlan, LandingPlanner, get_planner
 from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
 from helireach_ros.core.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
 
 __all__ = ["ClosedLoopResult", "ClosedLoopSettings", "fly_closed_loop", "measured_state"]
+
+_BEFORE_FAILURE_S = 0.1  # s before the failure at which the steady flight is measured
 
 
 @dataclass(frozen=True)
@@ -37,6 +44,8 @@ class ClosedLoopSettings:
         min_height: m; no re-planning below.
         min_remaining: s; no re-planning when the current plan has less time to go.
         rotor_noise_tolerance: fraction of Ω₀ a measured rotor speed may lie outside its limits as noise.
+        estimate_weight: plan for the gross weight estimated from the steady flight just before the failure
+            (its measured engine power), not the airframe file's.
     """
 
     replan_period: float = 0.25
@@ -44,6 +53,7 @@ class ClosedLoopSettings:
     min_height: float = 0.5
     min_remaining: float = 0.3
     rotor_noise_tolerance: float = 0.01
+    estimate_weight: bool = False
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.replan_period) and self.replan_period > 0.0):
@@ -61,12 +71,14 @@ class ClosedLoopResult:
         plans: converged plans made (the first included).
         failed_plans: solves that did not converge (the vehicle kept its current plan).
         unsafe_plans: converged plans not called safe (value > 0 or the replay failed).
+        planned_gross_weight: N, the weight the plans were made for (the estimate with ``estimate_weight``).
     """
 
     touchdown: TouchdownReport
     plans: int
     failed_plans: int
     unsafe_plans: int
+    planned_gross_weight: float = math.nan
 
 
 def measured_state(measurement: Measurement, vehicle: SimulatedVehicle, rotor_noise_tolerance: float) -> np.ndarray:
@@ -91,6 +103,13 @@ def fly_closed_loop(
         The touchdown and plan counts.
     """
     settings = settings or ClosedLoopSettings()
+    if settings.estimate_weight:
+        if vehicle.engine_failed:
+            raise ValueError("estimate_weight needs the vehicle before its failure (steady flight to measure)")
+        vehicle.advance(max(vehicle.scenario.failure_time - vehicle.time - _BEFORE_FAILURE_S, 0.0))
+        steady = vehicle.measure()  # the last steady flight before the failure
+        estimate = estimate_gross_weight(planner.airframe, steady.forward_speed, steady.climb_rate, steady.engine_power)
+        planner = get_planner(planner.airframe.with_conditions(gross_weight=estimate.gross_weight), planner.settings)
     if not vehicle.engine_failed:
         vehicle.advance(max(vehicle.scenario.failure_time - vehicle.time, 0.0))
     pending: list[tuple[float, ControlSchedule]] = []  # (arrival time, schedule), in order
@@ -125,4 +144,4 @@ def fly_closed_loop(
         if not vehicle.landed:
             vehicle.advance(max(next_tick - vehicle.time, 0.0))
     assert vehicle.touchdown is not None
-    return ClosedLoopResult(vehicle.touchdown, plans, failed, unsafe)
+    return ClosedLoopResult(vehicle.touchdown, plans, failed, unsafe, planner.airframe.gross_weight)
