@@ -11,9 +11,10 @@ set's sensor noise, after a total power loss from level trim. The planner keeps 
 ``seed`` flies initial state ``seed mod len(states)``; its draw and its noise come from ``seed`` alone, so
 ``--seeds S`` repeats a run exactly.
 
-Initial states: 500 ft / 75 kt; for each of 100, 200, 300, 400 and 550 ft the slowest speed (1 kt steps)
-at least 30 ft/kt inside the boundary of the shipped envelope (``Envelope.margin``; kept only within
-20-40 ft/kt); three states deep inside (700 ft / 40 kt, 350 ft / 110 kt, 600 ft / 90 kt).
+Initial states: 500 ft / 75 kt; for each of 100, 200, 250, 300, 350, 400, 450 and 550 ft the slowest speed
+(1 kt steps) at least 30 ft/kt inside the boundary of the shipped envelope's level slice (``Envelope.margin``;
+kept only within 20-40 ft/kt: with the flyable envelope 100, 200 and 550 ft have none); three states deep
+inside (700 ft / 40 kt, 350 ft / 110 kt, 600 ft / 90 kt).
 
 Margins (``--margins T/R``): the planner plans inside tightened limits (touchdown descent and forward
 speed × (1 − T), rotor-speed limits R × Ω₀ further inside) while every landing is judged against the true
@@ -58,7 +59,7 @@ from helireach_ros.core.uncertainty import (
 )
 from helireach_ros.core.units import FT, KT
 
-NEAR_BOUNDARY_HEIGHTS_FT = (100.0, 200.0, 300.0, 400.0, 550.0)
+NEAR_BOUNDARY_HEIGHTS_FT = (100.0, 200.0, 250.0, 300.0, 350.0, 400.0, 450.0, 550.0)
 NEAR_BOUNDARY_MARGIN = (20.0, 30.0, 40.0)  # accepted low, target, accepted high, ft/kt
 DEEP_STATES = ((700.0, 40.0), (350.0, 110.0), (600.0, 90.0))  # ft, kt
 WEIGHT_CHECK_LATENCIES = (0.05, 0.1, 0.3)
