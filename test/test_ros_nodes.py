@@ -26,6 +26,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.model import initial_state_after_failure, trim_controls
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.bringup import build_system
@@ -323,6 +324,11 @@ def test_failure_publishes_a_verified_trajectory_path_and_status(context: Contex
             "false",
         )
         assert fields["warm_start"] == "envelope"
+        assert (fields["method"], fields["flyable"], fields["flyability_violations"]) == ("flyable", "true", "")
+        # the first plan starts from the trim flown before the failure (what `replay --compare` re-runs it from)
+        uh60 = load_airframe("uh60a_class")
+        trim = trim_controls(uh60, initial_state_after_failure(uh60, 500 * FT, 75 * KT).as_array())
+        assert float(fields["initial_thrust_coefficient"]) == pytest.approx(trim[0], rel=1e-3)
         assert math.isclose(float(fields["time_to_land_s"]), times[-1], rel_tol=1e-6)
         assert math.isclose(float(fields["initial_height_m"]), 500 * FT)
         # The flyable plan's controls are continuous and rate-limited: one point per breakpoint, no steps.

@@ -472,6 +472,8 @@ def plan_status_values(plan: Any) -> dict[str, Any]:
         "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
         "method": plan.method,
         "reaction_delay_s": plan.reaction_delay_s,
+        "initial_thrust_coefficient": float(plan.initial_control[0]),
+        "initial_pitch_rad": float(plan.initial_control[1]),
         **flyability_values(plan.replay.flyability),
     }
 

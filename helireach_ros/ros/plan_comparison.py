@@ -134,7 +134,11 @@ def compare_logged_plans(
     for values, trajectory in pairs:
         state = np.array([float(values[key]) for key in _STATE_KEYS])
         stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope is not None else None
-        plan = planner.plan(state, stored.warm_start if stored is not None else None)
+        # the control flown at the plan's start and its reaction delay, as logged (older logs: the defaults)
+        logged_control = [values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")]
+        control = None if None in logged_control else np.array([float(value) for value in logged_control])
+        delay = float(values["reaction_delay_s"]) if "reaction_delay_s" in values else None
+        plan = planner.plan(state, stored.warm_start if stored is not None else None, control, delay)
         rerun_times, rerun_values = piecewise_linear_controls(
             plan.control_times, plan.control_values, plan.control_interpolation
         )
