@@ -42,6 +42,7 @@ from helireach_ros.core.transcription.base import DecodedPlan, terminal_cost
 __all__ = ["CONTACT_SEARCH_S", "ReplaySummary", "control_function", "replay_plan", "segment_integrator"]
 
 CONTACT_SEARCH_S = 10.0  # s a flyable plan's last control is held after its end, looking for ground contact
+_CONTACT_PIECE_S = 0.25  # s per integrated piece of that search
 
 
 @dataclass(frozen=True)
@@ -142,7 +143,11 @@ def _segments(plan: DecodedPlan, hold_after: float = 0.0) -> list[tuple[float, f
             plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land]
         )[:, 0]
         end = max(plan.time_to_land, float(breakpoints[-1]))
-        pieces.append((end, end + hold_after, last, last))
+        # short pieces: the replay stops after the first one that meets the ground, and the contact state is
+        # interpolated between samples ~30 ms apart
+        starts = end + np.arange(0.0, hold_after, _CONTACT_PIECE_S)
+        stops = np.minimum(starts + _CONTACT_PIECE_S, end + hold_after)
+        pieces.extend((float(start), float(stop), last, last) for start, stop in zip(starts, stops, strict=True))
     return pieces
 
 
