@@ -133,15 +133,11 @@ def _segments(plan: DecodedPlan, hold_after: float = 0.0) -> list[tuple[float, f
             pieces.append((start, end, value, value))
         else:
             pieces.append((start, end, plan.control_values[:, k], plan.control_values[:, k + 1]))
+    last = control_function(plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land])
+    last = last[:, 0]
     if breakpoints[-1] < plan.time_to_land - 1e-9:
-        last = control_function(
-            plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land]
-        )[:, 0]
         pieces.append((float(breakpoints[-1]), plan.time_to_land, last, last))
     if hold_after > 0.0:
-        last = control_function(
-            plan.control_times, plan.control_values, plan.control_interpolation, [plan.time_to_land]
-        )[:, 0]
         end = max(plan.time_to_land, float(breakpoints[-1]))
         # short pieces: the replay stops after the first one that meets the ground, and the contact state is
         # interpolated between samples ~30 ms apart

@@ -177,10 +177,12 @@ class CockpitDisplay(Node):
         envelope, envelope_data = self._load_envelope()
         self._envelope_id = envelope_data.get("envelope_id")
         self._envelope = envelope
-        # one 2-D slice per climb rate (a 2-D envelope is its own only slice): margins come from the measured
-        # climb rate's nearest slice, the drawn diagram is the level-flight slice
-        slices = [] if envelope is None else [envelope.slice(k) for k in range(_slice_count(envelope))]
-        self._envelope_slices = [(piece, np.asarray(piece.status) == "safe") for piece in slices]
+        # one safe mask per climb slice (a 2-D envelope has one): margins come from the measured climb rate's
+        # nearest slice, the drawn diagram is the level-flight slice
+        self._envelope_safe = None
+        if envelope is not None:
+            safe = np.asarray(envelope.status) == "safe"
+            self._envelope_safe = safe if envelope.is_3d else safe[None]
         self._config = self._config_section(envelope, envelope_data)
         limits = self._touchdown_limits or {}
         self._latest.touchdown_from_state = TouchdownFromState(
@@ -379,10 +381,10 @@ class CockpitDisplay(Node):
         margins = None
         if self._envelope is not None and content["height_m"] is not None and content["speed_ms"] is not None:
             climb = content["climb_ms"] if content["climb_ms"] is not None else 0.0
-            piece, safe = self._envelope_slices[self._envelope.nearest_slice(climb)]
+            safe = self._envelope_safe[self._envelope.nearest_slice(climb)]
             # judged as on the ground below 0 m, as the status node does
             height = max(content["height_m"], 0.0)
-            margins = axis_margins(piece.heights, piece.speeds, safe, height, content["speed_ms"])
+            margins = axis_margins(self._envelope.heights, self._envelope.speeds, safe, height, content["speed_ms"])
 
         def update(latest: _Latest, now: float) -> None:
             latest.state = _Received(content, now)
@@ -778,8 +780,3 @@ def main(args: list[str] | None = None) -> None:
 
 if __name__ == "__main__":
     main()
-
-
-def _slice_count(envelope: Any) -> int:
-    """Climb slices of an envelope (1 for a 2-D one)."""
-    return len(envelope.climb_rates) if envelope.is_3d else 1

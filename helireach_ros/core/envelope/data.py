@@ -276,7 +276,18 @@ class Envelope:
             name: self._arrays[name] if self.is_3d else self._arrays[name][None]
             for name in ("status_code", "value", "plan_primal")
         }
-        safe = self._stacked["status_code"] == 0
+        codes = self._stacked["status_code"]
+        primal = self._stacked["plan_primal"]
+        # nodes whose stored plan can warm-start a solve, found once (nearest_plan is on the failure path)
+        self._usable_plans = (
+            (codes >= 0)
+            & (codes != STATUS_CODES["failed"])
+            & (codes != STATUS_CODES["no_trim"])
+            & np.all(np.isfinite(primal), axis=3)
+        )
+        if primal.shape[3] == 0:
+            self._usable_plans[:] = False
+        safe = codes == 0
         heights_ft, speeds_kt = self.heights / FT, self.speeds / KT
         # margins between two slices use the combined slice (safe only where both are): one per enclosing set
         self._margin_geometry = {(k,): _MarginGeometry(heights_ft, speeds_kt, safe[k]) for k in range(safe.shape[0])}
@@ -474,11 +485,8 @@ class Envelope:
         height_m, speed_ms, climb_rate = _as_float(height_m), _as_float(speed_ms), _as_float(climb_rate)
         if not (math.isfinite(height_m) and math.isfinite(speed_ms)):
             return None
-        codes = self._stacked["status_code"]
-        primal = self._stacked["plan_primal"]
-        usable = (codes >= 0) & (codes != STATUS_CODES["failed"]) & np.all(np.isfinite(primal), axis=3)
-        usable &= codes != STATUS_CODES["no_trim"]
-        if primal.shape[3] == 0 or not np.any(usable):
+        usable = self._usable_plans
+        if not np.any(usable):
             return None
         climbs = self.climb_rates if self.is_3d else np.zeros(1)
         climb_rate = climb_rate if math.isfinite(climb_rate) else 0.0
