@@ -2,7 +2,7 @@
 
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
-     [--estimate-weight]
+     [--policies none weight disturbance weight+disturbance ...]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -25,9 +25,13 @@ Prints, per margin setting: the success rate with its 95 % Wilson interval overa
 the touchdown descent-rate and forward-speed distributions, the rotor-speed range, the success rate in the
 lower and upper half of each range (what the failures lean on), each failure's seed;
 then (unless ``--no-weight-check``) the issue's acceptance case, an unknown +5 % weight from 500 ft / 75 kt,
-for a few latencies and noise seeds. Parallel over ``--workers`` local processes. ``--estimate-weight``: the
-planner plans for the gross weight estimated from the engine power of the steady flight before the failure
-(:mod:`helireach_ros.core.estimation`), which also absorbs the drag and c_d errors into that weight.
+for a few latencies and noise seeds. Parallel over ``--workers`` local processes.
+
+Re-planning policies (``--policies``, each ``none`` or a ``+``-joined set; every policy is run with every
+margin setting, on the same draws): ``weight``: plan for the gross weight estimated from the engine power of
+the steady flight before the failure (:mod:`helireach_ros.core.estimation`, which also absorbs the drag and
+c_d errors into that weight); ``disturbance``: re-plan for the model plus the disturbance accelerations
+learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.disturbance`).
 """
 
 from __future__ import annotations
@@ -46,6 +50,7 @@ from baseline_config import loadavg_text
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
+from helireach_ros.core.disturbance import DisturbanceSettings
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.robust_verification import model_vehicle
@@ -134,9 +139,29 @@ def _context(uncertainty_file: str) -> tuple[Airframe, PlannerSettings, Uncertai
     return load_airframe("uh60a_class"), load_settings(None), load_uncertainty_set(uncertainty_file)
 
 
-def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int, bool]) -> dict:
+POLICY_PARTS = {"weight": "estimate_weight", "disturbance": "estimate_disturbance"}
+"""``--policies`` words and the :class:`ClosedLoopSettings` switch each turns on."""
+
+
+def parse_policy(text: str) -> str:
+    """A ``--policies`` entry: ``none`` or ``+``-joined :data:`POLICY_PARTS` words."""
+    parts = [] if text == "none" else text.split("+")
+    unknown = [part for part in parts if part not in POLICY_PARTS]
+    if unknown or len(set(parts)) != len(parts):
+        raise argparse.ArgumentTypeError(f"policy {text!r}: 'none' or {'+'.join(POLICY_PARTS)} parts, each once")
+    return text
+
+
+def closed_loop_settings(policy: str, latency: float, disturbance_gain: float) -> ClosedLoopSettings:
+    """The re-planning policy of a run."""
+    parts = [] if policy == "none" else policy.split("+")
+    switches = {switch: part in parts for part, switch in POLICY_PARTS.items()}  # each one explicit
+    return ClosedLoopSettings(latency=latency, disturbance=DisturbanceSettings(gain=disturbance_gain), **switches)
+
+
+def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int, str, float]) -> dict:
     """One closed-loop landing (a worker process's job)."""
-    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, estimate_weight = task
+    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, policy, disturbance_gain = task
     airframe, settings, _ = _context(uncertainty_file)
     planner = get_planner(margin.planning_airframe(airframe), settings)
     scenario = Scenario(
@@ -144,9 +169,7 @@ def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int,
     )
     vehicle = model_vehicle(scenario, model, airframe, settings)  # judged against the true limits
     started = time.perf_counter()
-    result = fly_closed_loop(
-        vehicle, planner, ClosedLoopSettings(latency=model.latency, estimate_weight=estimate_weight)
-    )
+    result = fly_closed_loop(vehicle, planner, closed_loop_settings(policy, model.latency, disturbance_gain))
     report = result.touchdown
     omega0 = airframe.nominal_rotor_speed
     return {
@@ -181,9 +204,9 @@ def _rate(within: int, runs: int) -> str:
 
 
 def report(
-    margin: Margin, states: list, seeds: list[int], draws: dict, results: list[dict], limits, uncertainty
+    policy: str, margin: Margin, states: list, seeds: list[int], draws: dict, results: list[dict], limits, uncertainty
 ) -> None:
-    print(f"\n== margins: {margin.label()} ==")
+    print(f"\n== policy {policy}; margins: {margin.label()} ==")
     print(f"{'initial state':>16} {'margin':>7}  {'within/runs':>9} {'rate':>7}  95 % Wilson CI")
     for index, (height, speed, envelope_margin) in enumerate(states):
         mine = [r for seed, r in zip(seeds, results, strict=True) if seed % len(states) == index]
@@ -222,7 +245,7 @@ def report(
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--runs", type=int, default=200, help="runs per margin setting (seeds first-seed ...)")
+    parser.add_argument("--runs", type=int, default=200, help="runs per setting (seeds first-seed ...)")
     parser.add_argument("--first-seed", type=int, default=0)
     parser.add_argument("--seeds", type=int, nargs="+", help="exactly these runs (overrides --runs)")
     parser.add_argument("--workers", type=int, default=2, help="local processes (the machine is shared: modest)")
@@ -230,7 +253,10 @@ def main() -> None:
     parser.add_argument("--uncertainty", default=DEFAULT_UNCERTAINTY_FILE)
     parser.add_argument("--no-weight-check", action="store_true", help="skip the +5 %% weight acceptance case")
     parser.add_argument(
-        "--estimate-weight", action="store_true", help="plan for the weight estimated from the power before the failure"
+        "--policies", type=parse_policy, nargs="+", default=["none"], help="re-planning policies (see the docstring)"
+    )
+    parser.add_argument(
+        "--disturbance-gain", type=float, default=DisturbanceSettings().gain, help="the disturbance filter's gain"
     )
     arguments = parser.parse_args()
     airframe, _, uncertainty = _context(arguments.uncertainty)
@@ -241,21 +267,23 @@ def main() -> None:
         f"uncertainty set {uncertainty.name!r} ({', '.join(uncertainty.uncertain_quantities)}), uniform draws; "
         f"{len(seeds)} runs per margin setting over {len(states)} initial states, {arguments.workers} workers"
     )
+    print(f"disturbance filter gain {arguments.disturbance_gain:g} (policies with 'disturbance')")
     draws, noise_seeds = {}, {}
     for seed in seeds:
         draw_sequence, noise_sequence = np.random.SeedSequence(seed).spawn(2)
         draws[seed] = uncertainty.draw(np.random.default_rng(draw_sequence))[0]
         noise_seeds[seed] = int(noise_sequence.generate_state(1)[0])
-    for margin in arguments.margins:
-        started = time.perf_counter()
-        tasks = [
-            (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed], uncertainty.sensor_noise,
-             noise_seeds[seed], arguments.estimate_weight)
-            for seed in seeds
-        ]  # fmt: skip
-        results = run_tasks(tasks, arguments.workers)
-        report(margin, states, seeds, draws, results, airframe.limits, uncertainty)
-        print(f"wall {time.perf_counter() - started:.0f} s; load average {loadavg_text()}")
+    for policy in arguments.policies:
+        for margin in arguments.margins:
+            started = time.perf_counter()
+            tasks = [
+                (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
+                 uncertainty.sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain)
+                for seed in seeds
+            ]  # fmt: skip
+            results = run_tasks(tasks, arguments.workers)
+            report(policy, margin, states, seeds, draws, results, airframe.limits, uncertainty)
+            print(f"wall {time.perf_counter() - started:.0f} s; load average {loadavg_text()}")
     if not arguments.no_weight_check:
         weight_check(arguments)
     print(f"load average at the end {loadavg_text()}")
@@ -266,18 +294,20 @@ def weight_check(arguments: argparse.Namespace) -> None:
     demo = load_scenario("demo_500ft_75kt")
     print("\n== unknown +5 % gross weight, 500 ft / 75 kt, the demo's sensor noise, no other error ==")
     tasks, keys = [], []
-    for margin in arguments.margins:
-        for latency in WEIGHT_CHECK_LATENCIES:
-            for seed in WEIGHT_CHECK_SEEDS:
-                model = PerturbedModel({"gross_weight": 0.05}, latency=latency, label="gross_weight+5%")
-                tasks.append(
-                    (arguments.uncertainty, margin, 500.0, 75.0, model, demo.noise, seed, arguments.estimate_weight)
-                )
-                keys.append((margin, latency, seed))
-    for (margin, latency, seed), r in zip(keys, run_tasks(tasks, arguments.workers), strict=True):
+    for policy in arguments.policies:
+        for margin in arguments.margins:
+            for latency in WEIGHT_CHECK_LATENCIES:
+                for seed in WEIGHT_CHECK_SEEDS:
+                    model = PerturbedModel({"gross_weight": 0.05}, latency=latency, label="gross_weight+5%")
+                    tasks.append(
+                        (arguments.uncertainty, margin, 500.0, 75.0, model, demo.noise, seed, policy,
+                         arguments.disturbance_gain)
+                    )  # fmt: skip
+                    keys.append((policy, margin, latency, seed))
+    for (policy, margin, latency, seed), r in zip(keys, run_tasks(tasks, arguments.workers), strict=True):
         verdict = "within limits" if r["within"] else f"OUTSIDE: {r['reason']}"
         print(
-            f"  {margin.label():34} latency {latency:.2f} s seed {seed}: {r['descent_ft_s']:4.1f} ft/s "
+            f"  {policy:12} {margin.label():34} latency {latency:.2f} s seed {seed}: {r['descent_ft_s']:4.1f} ft/s "
             f"{r['speed_kt']:4.1f} kt rotor {r['rotor_min_pct']:.1f}-{r['rotor_max_pct']:.1f} %  {verdict}"
         )
 

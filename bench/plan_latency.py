@@ -1,13 +1,16 @@
 """Solve-time percentiles of landing plans across the H-V plane, cold and warm, for each method.
 
 Run: .venv/bin/python bench/plan_latency.py [--states 60] [--airframe uh60a_class] [--baseline] [--method flyable]
+[--no-replans]
 
 "Cold" solves start from the transcription's generic guess. Two warm starts are timed:
 "warm, half a cell" starts from the plan of a state 10 ft and 2.5 kt away — half a cell of the
 default 41 × 25 envelope grid, the farthest the planner node's nearest stored plan can be — and
 "warm, far neighbour" starts from the previous state of a serpentine walk over this coarse grid
-(~100 ft / ~17 kt away). Times are IPOPT wall time per solve; the replay, which follows every
-solve, is timed separately. Prints what it measured on this machine and the load average.
+(~100 ft / ~17 kt away). With the flyable method, a third warm start is what the planner node does
+during a descent: the re-plans of lock-step closed-loop descents from 8 states (the demo scenario's 5 %
+drag mismatch and noise), each warm from the plan being flown. Times are IPOPT wall time per solve; the
+replay, which follows every solve, is timed separately. Prints what it measured on this machine and the load average.
 
 ``--baseline`` also runs the configuration before issue 13 (IPOPT's warm-solver options of then,
 plain CasADi functions) and the warm options alone, on the same states and the same warm starts,
@@ -19,6 +22,7 @@ machine). The compiled functions are used only if the cache holds them (``make n
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import platform
 import sys
@@ -28,10 +32,12 @@ import numpy as np
 from baseline_config import baseline_codegen, baseline_settings, loadavg_text
 
 from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import LandingPlanner
 from helireach_ros.core.settings import PlannerSettings, load_settings
+from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
 from helireach_ros.core.units import FT, KT
 
 _COMMIT_HEIGHT_FT = 20.0  # the flyable plans' commit height: below it, at speed, the NLP is nearly infeasible
@@ -120,12 +126,72 @@ def _run_method(airframe, method: str, points, baseline: bool) -> None:
         )
 
 
+_REPLAN_STARTS = ((500, 75), (300, 40), (700, 20), (250, 100), (400, 110), (800, 60), (600, 90), (150, 60))
+"""(height ft, speed kt) of the closed-loop descents whose re-plans are timed: across the safe region."""
+
+
+class _RecordingPlanner:
+    """The planner as :func:`fly_closed_loop` sees it, keeping every re-plan's arguments to time them again."""
+
+    def __init__(self, planner: LandingPlanner) -> None:
+        self.planner, self.airframe, self.settings = planner, planner.airframe, planner.settings
+        self.replans: list[tuple[np.ndarray, object, np.ndarray, object]] = []
+
+    def plan(self, state, warm_start=None, initial_control=None, reaction_delay_s=None, disturbance=None):
+        if warm_start is not None:
+            self.replans.append((np.asarray(state), warm_start, initial_control, disturbance))
+        return self.planner.plan(state, warm_start, initial_control, reaction_delay_s, disturbance=disturbance)
+
+
+def _run_replans(airframe, method: str, baseline: bool) -> None:
+    """Re-plans as the planner node makes them: along closed-loop descents of the demo scenario (5 % drag
+    mismatch, sensor noise, re-planning every 0.25 s from the control being flown, warm from the current plan),
+    recorded once and then timed for each configuration, interleaved re-plan by re-plan."""
+    configurations = _configurations(load_settings(method=method), baseline)
+    planners = [LandingPlanner(airframe, settings, codegen) for _, settings, codegen in configurations]
+    recorder = _RecordingPlanner(planners[-1])
+    scenario = load_scenario("demo_500ft_75kt")
+    landed = 0
+    for height_ft, speed_kt in _REPLAN_STARTS:
+        start = dataclasses.replace(scenario, height=height_ft * FT, forward_speed=speed_kt * KT)
+        vehicle = SimulatedVehicle(start, airframe, recorder.settings)
+        landed += fly_closed_loop(vehicle, recorder, ClosedLoopSettings()).touchdown.within_limits
+    samples: list[list[tuple[float, int, bool]]] = [[] for _ in planners]
+    statuses: list[dict[str, int]] = [{} for _ in planners]
+    for index, (state, warm_start, control, disturbance) in enumerate(recorder.replans):
+        order = list(range(len(planners)))
+        for which in order if index % 2 == 0 else order[::-1]:
+            plan = planners[which].plan(state, warm_start, control, 0.0, disturbance=disturbance)
+            samples[which].append((plan.solver.solve_time_ms, plan.solver.iterations, plan.solver.success))
+            statuses[which][plan.status] = statuses[which].get(plan.status, 0) + 1
+    print(
+        f"\nmethod {method}: re-plans along {len(_REPLAN_STARTS)} closed-loop descents of {scenario.name} "
+        f"({len(recorder.replans)} re-plans, warm from the current plan; {landed} of {len(_REPLAN_STARTS)} "
+        "descents landed within limits)"
+    )
+    for (name, _, _), rows, counts in zip(configurations, samples, statuses, strict=True):
+        times = [time_ms for time_ms, _, _ in rows]
+        converged = [time_ms for time_ms, _, success in rows if success]
+        iterations = np.mean([count for _, count, _ in rows])
+        print(f"  {name}: {_percentiles(times)}   ({iterations:.1f} iterations; statuses {counts})")
+        print(f"    converged only  {_percentiles(converged)}   ({len(converged)} re-plans)")
+    if baseline:
+        totals = [sum(time_ms for time_ms, _, _ in rows) for rows in samples]
+        ratios = ", ".join(
+            f"{name} {total / totals[0]:.3f}x" for (name, _, _), total in zip(configurations, totals, strict=True)
+        )
+        print(f"  total re-plan solve time relative to '{configurations[0][0]}': {ratios}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--states", type=int, default=60)
     parser.add_argument("--airframe", default="uh60a_class")
     parser.add_argument("--method", choices=("flyable", "verified", "paper", "all"), default="all")
     parser.add_argument("--baseline", action="store_true", help="also run the configuration before issue 13")
+    parser.add_argument(
+        "--no-replans", action="store_true", help="skip the re-plans along closed-loop descents (flyable only)"
+    )
     arguments = parser.parse_args()
     airframe = load_airframe(arguments.airframe)
     points = _serpentine_grid(arguments.states)
@@ -135,6 +201,8 @@ def main() -> None:
     methods = ("flyable", "verified", "paper") if arguments.method == "all" else (arguments.method,)
     for method in methods:
         _run_method(airframe, method, points, arguments.baseline)
+    if "flyable" in methods and not arguments.no_replans:
+        _run_replans(airframe, "flyable", arguments.baseline)
     print(f"\nload average after: {loadavg_text()}")
 
 

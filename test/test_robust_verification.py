@@ -47,9 +47,10 @@ def test_todays_plan_is_not_robust_over_the_default_corners_because_named_corner
     assert len(verdict.closed_loop) == len(verdict.open_loop) == 16
     assert _WORST_CORNER in verdict.failing_models  # heavy, draggy, thin air, late plans
     worst = next(outcome for outcome in verdict.closed_loop if outcome.model.label == _WORST_CORNER)
-    assert worst.touchdown.descent_rate > planner.airframe.limits.max_descent_rate
+    assert not worst.touchdown.within_limits  # with the model error learnt in flight: the rotor, 115.2 %
     failing = len(verdict.failing_models)
-    assert verdict.reason.startswith(f"{failing} of 16 models fail closed loop; first {_WORST_CORNER}: touchdown at")
+    assert verdict.reason.startswith(f"{failing} of 16 models fail closed loop; first {_WORST_CORNER}: ")
+    assert worst.touchdown.reason in verdict.reason
     assert 0 < failing < 16  # feedback saves some corners ...
     assert not any(outcome.within_limits for outcome in verdict.open_loop)  # ... open loop none
 

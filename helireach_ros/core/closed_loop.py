@@ -19,10 +19,11 @@ what the closed loop tolerates: ``bench/closed_loop_latency.py`` sweeps the late
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.estimation import estimate_gross_weight
 from helireach_ros.core.model import clip_rotor_speed_noise, state_from_sensors
 from helireach_ros.core.planner import LandingPlan, LandingPlanner, get_planner
@@ -46,6 +47,10 @@ class ClosedLoopSettings:
         rotor_noise_tolerance: fraction of Ω₀ a measured rotor speed may lie outside its limits as noise.
         estimate_weight: plan for the gross weight estimated from the steady flight just before the failure
             (its measured engine power), not the airframe file's.
+        estimate_disturbance: re-plan for the model plus the disturbance accelerations learnt from the
+            prediction error of each re-planning interval (:mod:`helireach_ros.core.disturbance`); on, as in the
+            planner node.
+        disturbance: how that estimate is made.
     """
 
     replan_period: float = 0.25
@@ -54,6 +59,8 @@ class ClosedLoopSettings:
     min_remaining: float = 0.3
     rotor_noise_tolerance: float = 0.01
     estimate_weight: bool = False
+    estimate_disturbance: bool = True
+    disturbance: DisturbanceSettings = field(default_factory=DisturbanceSettings)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.replan_period) and self.replan_period > 0.0):
@@ -72,6 +79,7 @@ class ClosedLoopResult:
         failed_plans: solves that did not converge (the vehicle kept its current plan).
         unsafe_plans: converged plans not called safe (value > 0 or the replay failed).
         planned_gross_weight: N, the weight the plans were made for (the estimate with ``estimate_weight``).
+        final_disturbance: the disturbance estimate of the last re-plan (zero without ``estimate_disturbance``).
     """
 
     touchdown: TouchdownReport
@@ -79,6 +87,7 @@ class ClosedLoopResult:
     failed_plans: int
     unsafe_plans: int
     planned_gross_weight: float = math.nan
+    final_disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def measured_state(measurement: Measurement, vehicle: SimulatedVehicle, rotor_noise_tolerance: float) -> np.ndarray:
@@ -115,11 +124,15 @@ def fly_closed_loop(
     pending: list[tuple[float, ControlSchedule]] = []  # (arrival time, schedule), in order
     current: tuple[float, LandingPlan] | None = None  # (time it starts from, plan)
     plans = failed = unsafe = 0
+    tracker = DisturbanceTracker(planner.airframe, settings.disturbance)
+    disturbance = np.zeros(3)
     replanning = True
     while not vehicle.landed:
         now = vehicle.time
         if replanning:
             state = measured_state(vehicle.measure(), vehicle, settings.rotor_noise_tolerance)
+            if settings.estimate_disturbance:
+                disturbance = tracker.update(now, state, vehicle.flown_controls)
             remaining = plan_time_remaining(current[1].time_to_land, now - current[0]) if current else math.inf
             if replanning_ends(state[3], remaining, settings.min_height, settings.min_remaining):
                 replanning = False
@@ -128,7 +141,10 @@ def fly_closed_loop(
                     plan = planner.plan(state)
                 else:  # a re-plan: from the control being flown now (continuous), no reaction delay
                     flying = current[1].controls_at([now - current[0]])[:, 0]
-                    plan = planner.plan(state, current[1].warm_start, initial_control=flying, reaction_delay_s=0.0)
+                    plan = planner.plan(
+                        state, current[1].warm_start, initial_control=flying, reaction_delay_s=0.0,
+                        disturbance=disturbance,
+                    )  # fmt: skip
                 if plan.solver.success:
                     plans += 1
                     unsafe += not plan.safe
@@ -144,4 +160,4 @@ def fly_closed_loop(
         if not vehicle.landed:
             vehicle.advance(max(next_tick - vehicle.time, 0.0))
     assert vehicle.touchdown is not None
-    return ClosedLoopResult(vehicle.touchdown, plans, failed, unsafe, planner.airframe.gross_weight)
+    return ClosedLoopResult(vehicle.touchdown, plans, failed, unsafe, planner.airframe.gross_weight, disturbance)

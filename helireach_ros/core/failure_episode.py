@@ -43,7 +43,10 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from helireach_ros.core.disturbance import DisturbanceTracker
 
 __all__ = [
     "EpisodePhase",
@@ -408,6 +411,7 @@ class FailureEpisode:
     deadline_handled: bool = False
     outcome: str = ""
     history: list[PublishedPlan] = field(default_factory=list)
+    disturbance: DisturbanceTracker | None = None  # the model's error learnt in this descent (None: not estimated)
 
     def remember(self, record: PublishedPlan) -> None:
         """Records a published plan as the episode's current one."""

@@ -38,11 +38,15 @@ from helireach_ros.core.airframe import Airframe
 
 __all__ = [
     "CONTROL_NAMES",
+    "DISTURBANCE_NAMES",
+    "DISTURBANCE_UNITS",
+    "NO_DISTURBANCE",
     "STATE_NAMES",
     "STATE_UNITS",
     "HelicopterState",
     "TrimCondition",
     "clip_rotor_speed_noise",
+    "disturbed_dynamics_function",
     "dynamics_function",
     "initial_state_after_failure",
     "smooth_positive",
@@ -56,6 +60,12 @@ __all__ = [
 STATE_NAMES = ("descent_rate", "forward_speed", "rotor_speed", "height", "distance", "engine_power")
 STATE_UNITS = ("m/s", "m/s", "rad/s", "m", "m", "W")
 CONTROL_NAMES = ("thrust_coefficient", "pitch_angle")
+DISTURBANCE_NAMES = ("descent_acceleration", "forward_acceleration", "rotor_acceleration")
+"""What :func:`disturbed_dynamics_function` adds to ẏ, v̇ and Ω̇: the model's error as constant accelerations."""
+DISTURBANCE_UNITS = ("m/s²", "m/s²", "rad/s²")
+NO_DISTURBANCE = np.zeros(3)
+NO_DISTURBANCE.flags.writeable = False
+"""The model as it is (zero disturbance accelerations); read-only."""
 
 _THRUST_GUARD = 1e-7  # C_T below which √C_T is smoothed (trim C_T is ~6e-3)
 _SPEED_GUARD = 1e-2  # m/s added in quadrature to V_f
@@ -169,6 +179,25 @@ def dynamics_function(airframe: Airframe) -> ca.Function:
     control = ca.SX.sym("u", 2)
     return ca.Function(
         "helicopter_dynamics", [state, control], [_state_derivative(airframe, state, control)], ["x", "u"], ["xdot"]
+    )
+
+
+@lru_cache(maxsize=64)
+def disturbed_dynamics_function(airframe: Airframe) -> ca.Function:
+    r"""The model plus constant disturbance accelerations, ``f(x[6], u[2], d[3]) -> xdot[6]``:
+
+    .. math:: \dot x = f(x, u) + (d_y, d_v, d_\Omega, 0, 0, 0)
+
+    d (:data:`DISTURBANCE_NAMES`) is what the closed loop learns of the model's error from the flight
+    (:mod:`helireach_ros.core.disturbance`): a heavier aircraft sinks and spins its rotor up faster than
+    the model says, and d carries the difference into the next plan. d = 0 is :func:`dynamics_function`.
+    """
+    state = ca.SX.sym("x", 6)
+    control = ca.SX.sym("u", 2)
+    disturbance = ca.SX.sym("d", 3)
+    derivative = dynamics_function(airframe)(state, control) + ca.vertcat(disturbance, ca.DM.zeros(3))
+    return ca.Function(
+        "disturbed_helicopter_dynamics", [state, control, disturbance], [derivative], ["x", "u", "d"], ["xdot"]
     )
 
 

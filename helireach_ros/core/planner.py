@@ -20,14 +20,28 @@ import numpy as np
 
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.compiled_nlp import CodegenSettings
-from helireach_ros.core.model import CONTROL_NAMES, STATE_NAMES, STATE_UNITS, HelicopterState, trim_controls
+from helireach_ros.core.model import (
+    CONTROL_NAMES,
+    DISTURBANCE_NAMES,
+    NO_DISTURBANCE,
+    STATE_NAMES,
+    STATE_UNITS,
+    HelicopterState,
+    trim_controls,
+)
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.transcription.base import SUCCESS_STATUSES, DecodedPlan, Transcription, terminal_cost
 from helireach_ros.core.transcription.flyable import FlyableTranscription
 from helireach_ros.core.transcription.paper import PaperTranscription
 from helireach_ros.core.transcription.verified import VerifiedTranscription
 from helireach_ros.core.units import FT, KT
-from helireach_ros.core.verification import ReplaySummary, control_function, replay_plan, segment_integrator
+from helireach_ros.core.verification import (
+    ReplaySummary,
+    control_function,
+    replay_plan,
+    segment_integrator,
+    segment_parameters,
+)
 
 __all__ = [
     "STATUSES",
@@ -97,6 +111,8 @@ class LandingPlan:
         initial_control: (C_T, θ) flown at the plan's start (the flyable plan's controls start there).
         reaction_delay_s: s at the start during which ``initial_control`` is held before the NLP's plan takes
             over (part of ``times``, the control function and the replay).
+        disturbance: the disturbance accelerations (d_y, d_v, d_Ω) the plan and its replay were made with
+            (:func:`~helireach_ros.core.model.disturbed_dynamics_function`; zero: the model as it is).
     """
 
     method: str
@@ -117,6 +133,7 @@ class LandingPlan:
     warm_start: WarmStart = field(repr=False)
     initial_control: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
     reaction_delay_s: float = 0.0
+    disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @property
     def safe(self) -> bool:
@@ -227,6 +244,7 @@ class LandingPlanner:
         warm_start: WarmStart | None = None,
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
+        disturbance: np.ndarray | None = None,
     ) -> LandingPlan:
         """Solves, replays and classifies a landing from ``state``.
 
@@ -241,6 +259,9 @@ class LandingPlanner:
                 Re-plans pass the current plan's control, so the flyable controls stay continuous.
             reaction_delay_s: s the controls stay at ``initial_control`` first (None: ``settings.reaction_delay_s``;
                 re-plans during a descent pass 0).
+            disturbance: (d_y, d_v, d_Ω) accelerations (m/s², m/s², rad/s²) added to the model's ẏ, v̇, Ω̇ in the
+                NLP, the delay segment and the replay: what the closed loop has learnt of the model's error
+                (:mod:`helireach_ros.core.disturbance`). None: the model as it is.
 
         Raises:
             ValueError: for a non-finite or non-physical state or control, or a warm start of another NLP.
@@ -249,6 +270,7 @@ class LandingPlanner:
         initial = initial.reshape(-1)
         _validate_state(initial, self.airframe)
         control = self._initial_control(initial, initial_control)
+        disturbance = _checked_disturbance(disturbance)
         transcription = self.transcription
         if warm_start is not None and (
             warm_start.primal.shape != transcription.lbx.shape
@@ -258,14 +280,14 @@ class LandingPlanner:
         delay = self.settings.reaction_delay_s if reaction_delay_s is None else float(reaction_delay_s)
         if not (np.isfinite(delay) and 0.0 <= delay <= 10.0):
             raise ValueError(f"the reaction delay must lie in [0, 10] s, got {reaction_delay_s!r}")
-        start, outcome = self._after_delay(initial, control, delay) if delay > 0.0 else (initial, "")
+        start, outcome = self._after_delay(initial, control, delay, disturbance) if delay > 0.0 else (initial, "")
         if outcome:
             decoded, solver_stats, warm = self._delay_only(initial, start, control, delay, outcome, warm_start)
         else:
-            decoded, solver_stats, warm = self._solve(np.concatenate([start, control]), warm_start)
+            decoded, solver_stats, warm = self._solve(np.concatenate([start, control, disturbance]), warm_start)
             if delay > 0.0:
                 decoded = _with_delay(decoded, initial, control, delay)
-        replay = replay_plan(self.airframe, self.settings, initial, decoded)
+        replay = replay_plan(self.airframe, self.settings, initial, decoded, disturbance)
         if solver_stats.status in DECIDED_BY_DELAY:
             value = replay.value
         else:
@@ -297,6 +319,7 @@ class LandingPlanner:
             warm_start=warm,
             initial_control=control,
             reaction_delay_s=delay,
+            disturbance=disturbance,
         )
 
     def _initial_control(self, state: np.ndarray, initial_control: np.ndarray | None) -> np.ndarray:
@@ -307,13 +330,15 @@ class LandingPlanner:
             raise ValueError(f"the initial control is (C_T, theta), finite; got {initial_control!r}")
         return control
 
-    def _after_delay(self, state: np.ndarray, control: np.ndarray, delay: float) -> tuple[np.ndarray, str]:
+    def _after_delay(
+        self, state: np.ndarray, control: np.ndarray, delay: float, disturbance: np.ndarray
+    ) -> tuple[np.ndarray, str]:
         """The state after ``delay`` s of constant ``control`` (the replay's integrator, so both agree), and
         ``""`` or the :data:`DECIDED_BY_DELAY` status when the delay alone decides the landing."""
         settings, limits = self.settings, self.airframe.limits
         integrator = segment_integrator(self.airframe, _DELAY_SAMPLES, settings.replay_relative_tolerance)
         try:
-            samples = np.asarray(integrator(x0=state, p=np.concatenate([control, control, [delay]]))["xf"])
+            samples = np.asarray(integrator(x0=state, p=segment_parameters(control, control, delay, disturbance))["xf"])
         except RuntimeError as error:
             raise ValueError(f"the reaction-delay segment cannot be integrated: {error}") from None
         end = samples[:, -1].copy()
@@ -377,9 +402,25 @@ class LandingPlanner:
         decoded = DecodedPlan(delay, times, states, times, controls, "linear", times, states)
         stats = SolverStats(outcome, True, 0, 0.0, False)
         if warm_start is None:  # a valid warm start of this NLP, for a caller that chains solves
-            guess = transcription.initial_guess(np.concatenate([initial, control]))
+            guess = transcription.initial_guess(np.concatenate([initial, control, NO_DISTURBANCE]))
             warm_start = WarmStart(guess, np.zeros_like(guess), np.zeros_like(transcription.lbg))
         return decoded, stats, warm_start
+
+
+MAX_DISTURBANCE = np.array([5.0, 5.0, 10.0])
+"""Largest |d| the planner accepts per component (m/s², m/s², rad/s²): half a g, and the rotor's whole
+speed range in ~3 s; anything larger is not a model error but a broken estimate."""
+
+
+def _checked_disturbance(disturbance: np.ndarray | None) -> np.ndarray:
+    if disturbance is None:
+        return np.zeros(3)
+    values = np.asarray(disturbance, dtype=float).reshape(-1)
+    if values.shape != (3,) or not np.all(np.isfinite(values)) or np.any(np.abs(values) > MAX_DISTURBANCE):
+        names = ", ".join(DISTURBANCE_NAMES)
+        bounds = MAX_DISTURBANCE.tolist()
+        raise ValueError(f"the disturbance is ({names}), finite, within ±{bounds}; got {disturbance!r}")
+    return values
 
 
 def _with_delay(plan: DecodedPlan, initial: np.ndarray, control: np.ndarray, delay: float) -> DecodedPlan:

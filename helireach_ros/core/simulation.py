@@ -41,7 +41,7 @@ from helireach_ros.core.resources import config_path
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.transcription.base import terminal_cost
 from helireach_ros.core.units import FT, KT, UnitError, convert_to_si
-from helireach_ros.core.verification import segment_integrator
+from helireach_ros.core.verification import segment_integrator, segment_parameters
 
 __all__ = [
     "HOLD_STEP_S",
@@ -407,6 +407,7 @@ class SimulatedVehicle:
         self.schedule: ControlSchedule | None = None
         self.touchdown: TouchdownReport | None = None
         self._held_controls = np.array([self.trim.thrust_coefficient, self.trim.pitch_angle])
+        self._followed: list[tuple[float, ControlSchedule]] = []  # (time it was received, schedule), in order
         self._rotor_range = (math.inf, -math.inf)
         self._rotor_low_above_commit = math.inf  # flyable plans: the in-flight limit holds above the commit height
         self._in_touchdown_set = False
@@ -425,6 +426,18 @@ class SimulatedVehicle:
     def follow(self, schedule: ControlSchedule) -> None:
         """Follows this schedule from now on (the latest received plan wins)."""
         self.schedule = schedule
+        self._followed.append((self.time, schedule))
+
+    def flown_controls(self, time: float) -> np.ndarray:
+        """(C_T, θ) the vehicle applied at a past (or the present) time: the schedule it was following then.
+
+        :meth:`controls` answers for the schedule followed *now*, which for a time before it arrived is not
+        what was flown (what a flight-control computer would record, and what a model-error estimate needs).
+        """
+        schedule = next((followed for since, followed in reversed(self._followed) if since <= time), None)
+        if self.phase != "cruise" and schedule is not None and time >= schedule.start_time:
+            return schedule.at(time)
+        return self._held_controls
 
     def controls(self, time: float | None = None) -> np.ndarray:
         """(C_T, θ) the vehicle applies at a time (default: now)."""
@@ -472,7 +485,7 @@ class SimulatedVehicle:
         start = self.time
         control_start = self.controls(start)
         control_end = self.controls(end - 1e-12) if self.schedule is not None else control_start
-        parameters = np.concatenate([control_start, control_end, [end - start]])
+        parameters = segment_parameters(control_start, control_end, end - start)  # the true vehicle: no d
         try:
             outputs = np.asarray(self._integrator(x0=self.state, p=parameters)["xf"])
         except RuntimeError as error:

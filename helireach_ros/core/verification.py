@@ -35,11 +35,18 @@ import numpy as np
 
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.flyability import FlyabilityReport, check_flyability
-from helireach_ros.core.model import STATE_NAMES, dynamics_function
+from helireach_ros.core.model import NO_DISTURBANCE, STATE_NAMES, disturbed_dynamics_function
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.transcription.base import DecodedPlan, terminal_cost
 
-__all__ = ["CONTACT_SEARCH_S", "ReplaySummary", "control_function", "replay_plan", "segment_integrator"]
+__all__ = [
+    "CONTACT_SEARCH_S",
+    "ReplaySummary",
+    "control_function",
+    "replay_plan",
+    "segment_integrator",
+    "segment_parameters",
+]
 
 CONTACT_SEARCH_S = 10.0  # s a flyable plan's last control is held after its end, looking for ground contact
 _CONTACT_PIECE_S = 0.25  # s per integrated piece of that search
@@ -99,14 +106,15 @@ def control_function(control_times: np.ndarray, control_values: np.ndarray, inte
 def segment_integrator(airframe: Airframe, samples: int, relative_tolerance: float) -> ca.Function:
     """CVODES over one control segment in normalised time σ ∈ [0, 1], outputs at ``samples`` points.
 
-    Parameters p = (u_start[2], u_end[2], duration): the control varies linearly over the segment
-    (constant when u_start = u_end), dx/dσ = duration · f(x, u(σ)).
+    Parameters p = (u_start[2], u_end[2], duration, d[3]) (:func:`segment_parameters`): the control varies
+    linearly over the segment (constant when u_start = u_end), dx/dσ = duration · f(x, u(σ), d), with d the
+    disturbance accelerations of :func:`~helireach_ros.core.model.disturbed_dynamics_function` (0: the model).
     """
     state = ca.SX.sym("x", 6)
-    parameters = ca.SX.sym("p", 5)
+    parameters = ca.SX.sym("p", 8)
     sigma = ca.SX.sym("t")
     control = parameters[0:2] + sigma * (parameters[2:4] - parameters[0:2])
-    ode = parameters[4] * dynamics_function(airframe)(state, control)
+    ode = parameters[4] * disturbed_dynamics_function(airframe)(state, control, parameters[5:8])
     grid = np.linspace(0.0, 1.0, samples + 1)[1:]
     options = {
         "reltol": relative_tolerance,
@@ -117,6 +125,14 @@ def segment_integrator(airframe: Airframe, samples: int, relative_tolerance: flo
     }
     return ca.integrator("replay_segment", "cvodes", {"x": state, "p": parameters, "t": sigma, "ode": ode}, 0.0,
                          grid, options)  # fmt: skip
+
+
+def segment_parameters(
+    control_start: np.ndarray, control_end: np.ndarray, duration: float, disturbance: np.ndarray | None = None
+) -> np.ndarray:
+    """The parameter vector of a :func:`segment_integrator` segment (``disturbance`` None: the model as it is)."""
+    disturbance = NO_DISTURBANCE if disturbance is None else disturbance
+    return np.concatenate([control_start, control_end, [duration], disturbance])
 
 
 def _segments(plan: DecodedPlan, hold_after: float = 0.0) -> list[tuple[float, float, np.ndarray, np.ndarray]]:
@@ -158,7 +174,11 @@ def _flown_controls(plan: DecodedPlan, end_time: float) -> tuple[np.ndarray, np.
 
 
 def replay_plan(
-    airframe: Airframe, settings: PlannerSettings, initial_state: np.ndarray, plan: DecodedPlan
+    airframe: Airframe,
+    settings: PlannerSettings,
+    initial_state: np.ndarray,
+    plan: DecodedPlan,
+    disturbance: np.ndarray | None = None,
 ) -> ReplaySummary:
     """Integrates the plan's controls from the initial state and judges the landing.
 
@@ -167,6 +187,7 @@ def replay_plan(
         settings: replay tolerances.
         initial_state: the state at the failure (6, SI).
         plan: the decoded NLP solution.
+        disturbance: the disturbance accelerations the plan was made for (None: the model as it is).
     """
     integrator = segment_integrator(airframe, settings.replay_samples_per_interval, settings.replay_relative_tolerance)
     state = np.asarray(initial_state, dtype=float)[:6]
@@ -174,7 +195,7 @@ def replay_plan(
     clearance = airframe.limits.ground_clearance
     at_contact = settings.method == "flyable"
     for start, end, control_start, control_end in _segments(plan, CONTACT_SEARCH_S if at_contact else 0.0):
-        parameters = np.concatenate([control_start, control_end, [end - start]])
+        parameters = segment_parameters(control_start, control_end, end - start, disturbance)
         try:
             outputs = np.asarray(integrator(x0=state, p=parameters)["xf"])
         except RuntimeError:

@@ -25,13 +25,13 @@ import numpy as np
 
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.compiled_nlp import CodegenSettings, ipopt_solvers
-from helireach_ros.core.model import dynamics_function, trim_level_flight
+from helireach_ros.core.model import disturbed_dynamics_function, trim_level_flight
 from helireach_ros.core.settings import PlannerSettings
 
 __all__ = ["PARAMETER_SIZE", "DecodedPlan", "Transcription", "terminal_cost"]
 
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-PARAMETER_SIZE = 8  # (y, v, Ω, h, z, P) at the start, then the controls (C_T, θ) being flown then
+PARAMETER_SIZE = 11  # (y, v, Ω, h, z, P) at the start, the controls (C_T, θ) being flown then, the disturbance d
 
 
 def terminal_cost(airframe: Airframe, state) -> float:
@@ -79,7 +79,8 @@ class DecodedPlan:
 class Transcription(ABC):
     """A landing NLP built once for an (airframe, settings) pair and solved for many initial states.
 
-    The NLP parameter is the initial state and the control flown then (:data:`PARAMETER_SIZE`). Subclasses
+    The NLP parameter is the initial state, the control flown then and the disturbance accelerations the
+    dynamics carry (:func:`~helireach_ros.core.model.disturbed_dynamics_function`; :data:`PARAMETER_SIZE`). Subclasses
     define the decision vector, constraints, cold initial guess and decoding; this class supplies scaling,
     bounds and the IPOPT solvers (on compiled NLP functions when the cache has them,
     :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which).
@@ -88,7 +89,7 @@ class Transcription(ABC):
     def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
         self.airframe = airframe
         self.settings = settings
-        self.dynamics = dynamics_function(airframe)
+        self.dynamics = disturbed_dynamics_function(airframe)
         hover = trim_level_flight(airframe, 0.0)
         # Scales bring every decision variable to O(1): IPOPT's steps and tolerances are then comparable.
         self.state_scale = np.array([10.0, 30.0, airframe.nominal_rotor_speed, 100.0, 100.0, hover.power])
@@ -103,11 +104,13 @@ class Transcription(ABC):
         self.state_upper = np.array([100.0, 120.0, rotor_high, 1e4, 1e5, 1e9])
         self.control_lower = np.array([0.0, -limits.max_pitch_angle])
         self.control_upper = np.array([airframe.max_thrust_coefficient, limits.max_pitch_angle])
-        # The NLP parameter: the initial state and the control flown at that moment (only the flyable scheme,
-        # whose controls are continuous, uses the control; one parameter layout keeps every caller alike).
+        # The NLP parameter: the initial state, the control flown at that moment (only the flyable scheme,
+        # whose controls are continuous, uses the control; one parameter layout keeps every caller alike) and
+        # the disturbance accelerations (zero: the model as it is).
         self.parameters = ca.SX.sym("p", PARAMETER_SIZE)
         self.initial_state = self.parameters[0:6]
         self.initial_control = self.parameters[6:8]
+        self.disturbance = self.parameters[8:11]
         self._build()
         nlp = {"x": self.decision, "p": self.parameters, "f": self.objective, "g": self.constraints}
         base = {

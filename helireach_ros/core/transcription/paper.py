@@ -51,7 +51,7 @@ class PaperTranscription(Transcription):
         state_scale = ca.DM(self.state_scale)
         physical_states = ca.horzcat(self.initial_state, states * ca.repmat(state_scale, 1, count))
         physical_controls = controls * ca.repmat(ca.DM(self.control_scale), 1, count)
-        derivatives = self.dynamics.map(count)(physical_states[:, :count], physical_controls)
+        derivatives = self.dynamics.map(count)(physical_states[:, :count], physical_controls, self.disturbance)
 
         residuals = []
         for i in range(count):

@@ -83,7 +83,7 @@ class VerifiedTranscription(Transcription):
         """The scaled collocation equations (6 per point) for the states and the controls at the points."""
         degree = self.settings.degree
         state_scale = ca.DM(self.state_scale)
-        derivatives = self.dynamics.map(self.n_states)(physical_states, control_at_point)
+        derivatives = self.dynamics.map(self.n_states)(physical_states, control_at_point, self.disturbance)
         residuals = []
         previous_end = self.initial_state
         for k in range(self.settings.intervals):

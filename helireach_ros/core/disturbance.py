@@ -1,0 +1,162 @@
+"""What the flight says about the model's error: disturbance accelerations for the next plan (issue 12).
+
+Between two re-plans the closed loop knows where the vehicle was, which controls it flew, and where it is
+now. Integrating the planner's model over that interval from the earlier measurement, with the controls
+flown and the current estimate d̂, predicts the later one; the difference is the part of the motion the
+model missed. As constant accelerations on ẏ, v̇ and Ω̇
+(:func:`~helireach_ros.core.model.disturbed_dynamics_function`), with Δt the interval:
+
+.. math:: \\hat d \\leftarrow \\operatorname{clip}\\Big(\\hat d
+          + g\\,\\frac{(x_{meas} - x_{pred})_{y, v, \\Omega}}{\\Delta t}\\Big)
+
+a first-order filter of gain g ∈ (0, 1] (offset-free model-predictive control: the next plan is made for
+the model plus d̂, so a constant error is learnt instead of re-discovered at every re-plan). A heavier
+aircraft than the model's sinks faster and spins its rotor up faster in the flare; without d̂ every
+re-plan expects the rotor to stop where the model says and is wrong by the same amount again, until the
+rotor reaches its limit and no plan is feasible (measured in :mod:`helireach_ros.core.robust_verification`'s
+corners). Sensor noise enters d̂ as σ√2 / Δt, damped by g; the estimate is clipped to
+:data:`~helireach_ros.core.planner.MAX_DISTURBANCE`.
+
+The plans made for d̂ are judged by their replay in the same disturbed model: ``safe`` then means "safe in
+the model corrected by what this flight has shown", which is what the plan is flown in.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.planner import MAX_DISTURBANCE
+from helireach_ros.core.verification import segment_integrator, segment_parameters
+
+__all__ = ["DisturbanceSettings", "DisturbanceTracker", "predict_state", "updated_disturbance"]
+
+_PREDICTION_SEGMENTS = 5  # the flown control is sampled at 6 times over the interval, linear in between
+_PREDICTION_SAMPLES = 2
+
+
+@dataclass(frozen=True)
+class DisturbanceSettings:
+    """How the closed loop learns the model's error.
+
+    Attributes:
+        gain: g, the fraction of each interval's prediction error taken into the estimate (1: the last
+            interval's error alone; smaller: averaged over ~1/g intervals, less sensor noise). 0.3 by measurement
+            (``bench/monte_carlo.py --policies disturbance --disturbance-gain G``; README, issue 12).
+        relative_tolerance: of the prediction's integrator.
+    """
+
+    gain: float = 0.3
+    relative_tolerance: float = 1e-6
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.gain) and 0.0 < self.gain <= 1.0):
+            raise ValueError(f"gain must lie in (0, 1], got {self.gain!r}")
+
+
+def predict_state(
+    airframe: Airframe,
+    state: np.ndarray,
+    controls_at: Callable[[float], np.ndarray],
+    start_time: float,
+    duration: float,
+    disturbance: np.ndarray,
+    relative_tolerance: float = 1e-6,
+) -> np.ndarray:
+    """The model's state ``duration`` s after ``state``, flying ``controls_at(t)`` from ``start_time`` on.
+
+    The control is sampled at the ends of :data:`_PREDICTION_SEGMENTS` equal sub-intervals and taken as
+    linear in between (the flyable plans' controls are piecewise linear; a plan switch inside a
+    sub-interval is smoothed over it).
+    """
+    integrator = segment_integrator(airframe, _PREDICTION_SAMPLES, relative_tolerance)
+    current = np.asarray(state, dtype=float)[:6].copy()
+    step = duration / _PREDICTION_SEGMENTS
+    for index in range(_PREDICTION_SEGMENTS):
+        begin = start_time + index * step
+        parameters = segment_parameters(controls_at(begin), controls_at(begin + step), step, disturbance)
+        current = np.asarray(integrator(x0=current, p=parameters)["xf"])[:, -1]
+    return current
+
+
+def updated_disturbance(
+    airframe: Airframe,
+    estimate: np.ndarray,
+    previous_state: np.ndarray,
+    measured_state: np.ndarray,
+    controls_at: Callable[[float], np.ndarray],
+    start_time: float,
+    duration: float,
+    settings: DisturbanceSettings | None = None,
+) -> np.ndarray:
+    """The estimate d̂ after one interval (see the module docstring).
+
+    Args:
+        airframe: the planner's model.
+        estimate: d̂ before the interval (3,).
+        previous_state: the measured state at ``start_time`` (6, SI).
+        measured_state: the measured state ``duration`` s later.
+        controls_at: the controls flown, as a function of time.
+        start_time: s.
+        duration: s, > 0.
+
+    Returns:
+        The new estimate; the old one where the prediction cannot be made (a non-finite state, an
+        integrator failure), so a bad interval never makes the estimate worse than it was.
+    """
+    settings = settings or DisturbanceSettings()
+    estimate = np.asarray(estimate, dtype=float).reshape(3)
+    if not (math.isfinite(duration) and duration > 0.0):
+        raise ValueError(f"duration must be > 0, got {duration!r}")
+    measured = np.asarray(measured_state, dtype=float)[:6]
+    if not (np.all(np.isfinite(previous_state[:6])) and np.all(np.isfinite(measured))):
+        return estimate
+    try:
+        predicted = predict_state(
+            airframe, previous_state, controls_at, start_time, duration, estimate, settings.relative_tolerance
+        )
+    except RuntimeError:
+        return estimate
+    innovation = (measured[:3] - predicted[:3]) / duration
+    return np.clip(estimate + settings.gain * innovation, -MAX_DISTURBANCE, MAX_DISTURBANCE)
+
+
+class DisturbanceTracker:
+    """The estimate d̂ of one descent, fed with each re-planning tick's measurement (the planner node's and the
+    lock-step closed loop's policy alike).
+
+    Args:
+        airframe: the planner's model.
+        settings: the filter.
+    """
+
+    def __init__(self, airframe: Airframe, settings: DisturbanceSettings | None = None) -> None:
+        self.airframe = airframe
+        self.settings = settings or DisturbanceSettings()
+        self.estimate = np.zeros(3)
+        self._previous: tuple[float, np.ndarray] | None = None
+
+    def update(self, time: float, state: np.ndarray, controls_at: Callable[[float], np.ndarray]) -> np.ndarray:
+        """Takes the measurement at ``time`` (s) and the controls flown since the previous one; returns d̂.
+
+        The first measurement of a descent only starts the interval; one not later than the previous one (a
+        repeated or out-of-order stamp) is ignored.
+        """
+        state = np.asarray(state, dtype=float)[:6].copy()
+        if self._previous is not None and time > self._previous[0]:
+            start, previous = self._previous
+            self.estimate = updated_disturbance(
+                self.airframe, self.estimate, previous, state, controls_at, start, time - start, self.settings
+            )
+        if self._previous is None or time > self._previous[0]:
+            self._previous = (time, state)
+        return self.estimate.copy()
+
+    def reset(self) -> None:
+        """A new descent: nothing learnt yet."""
+        self.estimate = np.zeros(3)
+        self._previous = None
