@@ -72,6 +72,22 @@ def test_demo_lands_within_limits_with_five_percent_mismatch_by_replanning(demo)
     assert all(figure.stat().st_size > 10_000 for figure in demo.figures)
 
 
+def test_the_replans_are_made_for_the_model_error_learnt_in_flight(demo) -> None:
+    """The vehicle's drag areas are 5 % above the model's: each re-plan is made for the model plus the disturbance
+    accelerations learnt from the descent so far (``estimate_disturbance``, on by default), and its logged status
+    says which; the failure plan has none (nothing was flown yet)."""
+    assert np.array_equal(demo.first_plan.plan.disturbance, np.zeros(3))
+    learnt = np.array([record.plan.disturbance for record in demo.plans if record.replan_index > 0])
+    assert len(learnt) >= 10 and np.abs(learnt).max() > 0.02, learnt
+    logged = [
+        rm.status_values(deserialize_message(message.cdr, DiagnosticStatus))
+        for message in read_log(demo.log_path)
+        if message.topic == rm.TOPIC_PLAN_STATUS
+    ]
+    replanned = [values for values in logged if values.get("replan_index", "0") != "0"]
+    assert replanned and any(float(values["disturbance_descent_acceleration_m_s2"]) != 0.0 for values in replanned)
+
+
 def test_the_log_holds_every_topic_and_the_run_metadata(demo) -> None:
     with demo.log_path.open("rb") as stream:
         summary_section = make_reader(stream).get_summary()  # the independent mcap reader; a finished file

@@ -15,7 +15,7 @@ import pytest
 
 from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlan, WarmStart, plan_landing
+from helireach_ros.core.planner import LandingPlan, WarmStart, get_planner, plan_landing
 from helireach_ros.core.solver_pool import (
     PRIORITY_FAILURE,
     PRIORITY_LIVE,
@@ -77,6 +77,16 @@ def test_the_pool_answers_as_the_planner_in_process(pool, airframe, settings, he
     assert remote.replay.lands_within_limits == local.replay.lands_within_limits
     warm = pool.plan(state, local.warm_start)
     assert warm.solver.warm_started and warm.status == local.status
+
+
+def test_the_pool_plans_for_the_requested_disturbance(pool, airframe, settings) -> None:
+    state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+    disturbance = np.array([0.5, -0.1, 0.3])
+    local = get_planner(airframe, settings).plan(state, disturbance=disturbance)
+    remote = pool.plan(state, disturbance=disturbance)
+    assert np.array_equal(remote.disturbance, disturbance)
+    assert remote.value == pytest.approx(local.value, abs=1e-9)
+    assert remote.value != pytest.approx(pool.plan(state).value, abs=1e-6)  # the disturbance reached the NLP
 
 
 def test_a_state_the_planner_refuses_is_a_value_error_and_the_pool_goes_on(pool, airframe) -> None:

@@ -11,7 +11,14 @@ Writes ``<out>/hv_diagram.png`` (the H-V diagram with the flown track), ``<out>/
 Exits 0 only if the landing met the limits. ``--hold`` keeps the nodes running after touchdown
 (the cockpit display page, served by default, stays up with them) until Ctrl-C.
 
-Run: ``python -m helireach_ros.cli.demo --out out [--hold] [--no-display] [--scenario NAME]``.
+``--mismatch NAME`` flies a model-mismatch preset instead of the scenario's own
+(:mod:`helireach_ros.core.mismatch_presets`: ``none``, ``drag+5`` = the default scenario's, ``weight+5`` = an
+unknown 5 % heavier aircraft, ``weight-5``, ``heavy+draggy``, ``light+clean``). With a preset the planner estimates
+the gross weight before the failure (planner parameter ``estimate_weight``; off by default, so ``make demo`` is
+unchanged); ``--no-estimate-weight`` / ``--estimate-weight`` choose explicitly. The summary names the preset and the
+weight the planner used.
+
+Run: ``python -m helireach_ros.cli.demo --out out [--hold] [--no-display] [--scenario NAME] [--mismatch NAME]``.
 """
 
 from __future__ import annotations
@@ -27,9 +34,10 @@ from typing import Any
 
 import numpy as np
 
+from helireach_ros.core.mismatch_presets import MISMATCH_PRESET_NAMES
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
-__all__ = ["DemoResult", "main", "run_demo"]
+__all__ = ["DemoResult", "demo_ros_arguments", "main", "register", "run_demo"]
 
 _TOUCHDOWN_TIMEOUT_S = 120.0  # wall time from start; the demo scenario lands about 16 s in
 
@@ -68,6 +76,9 @@ class DemoResult:
         self.limits: Any = None
         self.flyability: Any = None
         self.nominal_rotor_speed = float("nan")
+        self.mismatch_preset: str | None = None  # None: the scenario's own mismatch
+        self.planned_weight: Any = None  # the planner's WeightChoice for the failure
+        self.file_gross_weight = float("nan")
 
     @property
     def landed_within_limits(self) -> bool:
@@ -85,8 +96,16 @@ def run_demo(
     handle_signals: bool = True,
     figures: bool = True,
     executor: str = DEFAULT_EXECUTOR,
+    mismatch: str | None = None,
+    estimate_weight: bool | None = None,
 ) -> DemoResult:
-    """Runs the demo (see the module docstring) and returns what it produced."""
+    """Runs the demo (see the module docstring) and returns what it produced.
+
+    ``mismatch``: a preset the vehicle flies (None: the scenario's own); ``estimate_weight``: the planner's
+    parameter (None: on with a preset, else its configured value).
+    """
+    if estimate_weight is None and mismatch is not None:
+        estimate_weight = True  # the presets are there to show what the estimate buys
     from helireach_ros.ros.bringup import build_system
     from helireach_ros.ros.messages import LEVEL_NAMES
 
@@ -98,6 +117,7 @@ def run_demo(
 
         extra.append(create_display_with_fallback)
     result = DemoResult()
+    result.mismatch_preset = mismatch
     system = build_system(
         params_files,
         with_sim=True,
@@ -105,6 +125,7 @@ def run_demo(
         scenario=scenario,
         extra_nodes=extra,
         context=context,
+        ros_args=demo_ros_arguments(mismatch, estimate_weight),
         executor=executor,
         command="python -m helireach_ros.cli.demo",
     )
@@ -141,6 +162,8 @@ def run_demo(
             system.spin_until(landed, remaining)
             system.drain()
             result.touchdown = sim.touchdown
+            result.planned_weight = planner.episode_weight if planner.planner is not None else None
+            result.file_gross_weight = planner.airframe.gross_weight if planner.planner is not None else math.nan
             result.plans = [record for record in planner.published_plans if record.failure_id == 1]
             standby = [record for record in result.plans if planner.is_standby(record)]
             result.standby_plan = standby[0] if standby else None
@@ -157,6 +180,22 @@ def run_demo(
     if figures:
         result.figures = _write_figures(out, result, status.envelope)
     return result
+
+
+def demo_ros_arguments(mismatch: str | None, estimate_weight: bool | None) -> list[str]:
+    """The ``-p`` arguments for a mismatch preset (the vehicle) and the planner's ``estimate_weight``.
+
+    Raises:
+        ValueError: an unknown preset.
+    """
+    arguments: list[str] = []
+    if mismatch is not None:
+        if mismatch not in MISMATCH_PRESET_NAMES:
+            raise ValueError(f"unknown mismatch preset {mismatch!r} (one of {', '.join(MISMATCH_PRESET_NAMES)})")
+        arguments += ["-p", f"helireach_sim_vehicle:mismatch:={mismatch}"]
+    if estimate_weight is not None:
+        arguments += ["-p", f"helireach_planner:estimate_weight:={'true' if estimate_weight else 'false'}"]
+    return arguments
 
 
 def _write_figures(out: Path, result: DemoResult, envelope: Any) -> list[Path]:
@@ -179,10 +218,18 @@ def summary(result: DemoResult) -> str:
 
     scenario, limits = result.scenario, result.limits
     mismatch = ", ".join(f"{name} {fraction:+.0%}" for name, fraction in scenario.parameter_mismatch.items()) or "none"
+    preset = f"preset {result.mismatch_preset}" if result.mismatch_preset is not None else "the scenario's own"
     lines = [
         f"helireach demo: {scenario.name}: {scenario.height / FT:.0f} ft, {scenario.forward_speed / KT:.0f} kt, "
-        f"engine failure at {scenario.failure_time:g} s (vehicle vs model: {mismatch})",
+        f"engine failure at {scenario.failure_time:g} s (vehicle vs model, {preset}: {mismatch})",
     ]
+    weight = result.planned_weight
+    if weight is not None:
+        note = f" ({weight.reason})" if weight.reason else ""
+        lines.append(
+            f"  planned gross weight      : {weight.gross_weight:.0f} N, {100 * weight.relative_change:+.1f} % vs the "
+            f"file's {result.file_gross_weight:.0f} N, {weight.source}{note}"
+        )
     level, message = result.status_before_failure or ("none", "no safety status received")
     lines.append(f"  status before the failure : {level}: {message}")
     samples = sum(result.status_during_descent.values())
@@ -243,8 +290,28 @@ def summary(result: DemoResult) -> str:
 def main(argv: list[str] | None = None) -> int:
     """``python -m helireach_ros.cli.demo``; exits 0 only if the landing met the limits."""
     parser = argparse.ArgumentParser(prog="helireach-demo", description=__doc__.split("\n\n")[0])
+    _add_arguments(parser)
+    arguments = parser.parse_args(argv)
+    return _run(arguments)
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", default="out", help="folder for the figures and the MCAP log")
     parser.add_argument("--scenario", default=None, help="simulated scenario (default: demo_500ft_75kt)")
+    parser.add_argument(
+        "--mismatch",
+        choices=MISMATCH_PRESET_NAMES,
+        default=None,
+        help="model mismatch the vehicle flies instead of the scenario's own (default: the scenario's; "
+        "demo_500ft_75kt's is drag+5)",
+    )
+    parser.add_argument(
+        "--estimate-weight",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the planner plans for the gross weight it estimates before the failure (default: on with --mismatch, "
+        "else the planner's parameter, off)",
+    )
     parser.add_argument("--hold", action="store_true", help="keep the nodes running after touchdown until Ctrl-C")
     parser.add_argument(
         "--no-display", dest="display", action="store_false", help="do not serve the cockpit display page"
@@ -253,7 +320,16 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="executor kind (default: %(default)s)"
     )
-    arguments = parser.parse_args(argv)
+
+
+def register(subparsers: Any) -> None:
+    """Adds ``helireach demo`` (the same options as ``python -m helireach_ros.cli.demo``)."""
+    parser = subparsers.add_parser("demo", help="the engine-failure demo", description=__doc__.split("\n\n")[0])
+    _add_arguments(parser)
+    parser.set_defaults(handler=_run)
+
+
+def _run(arguments: argparse.Namespace) -> int:
     try:
         result = run_demo(
             arguments.out,
@@ -262,6 +338,8 @@ def main(argv: list[str] | None = None) -> int:
             display=arguments.display,
             params_files=tuple(arguments.params_file),
             executor=arguments.executor,
+            mismatch=arguments.mismatch,
+            estimate_weight=arguments.estimate_weight,
         )
     except (FileNotFoundError, ValueError) as error:  # a missing parameter file, a bad parameter or scenario
         print(f"helireach demo: {error}", file=sys.stderr)

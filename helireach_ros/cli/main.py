@@ -24,6 +24,7 @@ SUBCOMMAND_MODULES = (
     "helireach_ros.cli.replay",
     "helireach_ros.cli.log",
     "helireach_ros.cli.display",
+    "helireach_ros.cli.demo",
 )
 
 

@@ -16,6 +16,15 @@ the NLP built once and warmed up.
   supervision tick, :data:`SUPERVISION_PERIOD_S`, of the death or the timeout), and the caller falls back as it
   would after a failed solve. :attr:`SolverPool.restarts` counts restarts for diagnostics.
 - **Start method.** ``forkserver`` (or ``spawn``), never ``fork``: the parent runs rclpy's threads.
+- **Gross weight** (issue 12). A request may name the gross weight to plan for (NaN: the airframe's). A worker
+  builds that weight's NLP at the first request for it (:func:`~helireach_ros.core.planner.get_planner` caches up
+  to 16 per process; the compiled-NLP cache is keyed by the NLP's hash, so a new weight runs on plain CasADi
+  functions) and keeps it. The pool records which weights each worker has answered for
+  (:meth:`SolverPool.ready_weights`). A failure job goes to an idle worker that holds its weight; a live job to one
+  that lacks it, so the workers build a new weight one after the other before any failure. Before a failure only
+  one live job runs at a time and it runs on a worker lacking the weight whenever one is idle, so a weight one ready
+  worker holds finds that worker idle at the failure: no NLP is built in the failure path. A restarted worker holds
+  the airframe's weight only.
 """
 
 from __future__ import annotations
@@ -23,6 +32,7 @@ from __future__ import annotations
 import functools
 import heapq
 import itertools
+import math
 import multiprocessing
 import os
 import threading
@@ -99,6 +109,8 @@ class _SolveRequest:
     cold_check: bool
     initial_control: np.ndarray | None = None
     reaction_delay_s: float | None = None
+    gross_weight: float = math.nan  # N; NaN = the worker's airframe's
+    disturbance: np.ndarray | None = None  # (d_y, d_v, d_Ω); None = the model as it is
 
 
 @dataclass(frozen=True)
@@ -114,6 +126,12 @@ def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSe
     from helireach_ros.core.planner import get_planner
 
     planner = get_planner(airframe, settings)
+
+    def planner_for(gross_weight: float) -> Any:  # built at the first request for a weight, then cached
+        if math.isnan(gross_weight) or gross_weight == airframe.gross_weight:
+            return planner
+        return get_planner(airframe.with_conditions(gross_weight=gross_weight), settings)
+
     if warm_up:
         planner.plan(initial_state_after_failure(airframe, 150.0, 38.0))
     connection.send_bytes(_READY)
@@ -127,7 +145,10 @@ def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSe
         try:
             request = decode_dataclass(_SolveRequest, data)
             solve = functools.partial(
-                planner.plan, initial_control=request.initial_control, reaction_delay_s=request.reaction_delay_s
+                planner_for(request.gross_weight).plan,
+                initial_control=request.initial_control,
+                reaction_delay_s=request.reaction_delay_s,
+                disturbance=request.disturbance,
             )
             if request.cold_check:
                 plan = solve_with_cold_check(solve, request.state, request.warm_start)
@@ -146,6 +167,7 @@ class _Job:
     timeout_s: float
     priority: int
     started: float = 0.0
+    gross_weight: float = math.nan
 
 
 class _Worker:
@@ -160,6 +182,7 @@ class _Worker:
         child.close()
         self.ready = False
         self.job: _Job | None = None
+        self.weights = {airframe.gross_weight}  # gross weights this worker has answered for (its NLPs)
 
     def kill(self) -> None:
         if self.process.is_alive():
@@ -210,11 +233,14 @@ class SolverPool:
         cold_check: bool = False,
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
+        gross_weight: float | None = None,
+        disturbance: np.ndarray | None = None,
     ) -> Future:
         """Queues a solve; the future gives the :class:`~helireach_ros.core.planner.LandingPlan`.
 
-        ``initial_control`` and ``reaction_delay_s`` are passed to
-        :meth:`~helireach_ros.core.planner.LandingPlanner.plan` (None: its defaults).
+        ``initial_control``, ``reaction_delay_s`` and ``disturbance`` are passed to
+        :meth:`~helireach_ros.core.planner.LandingPlanner.plan` (None: its defaults). ``gross_weight`` (N, None =
+        the pool's airframe's): plan for the airframe at that weight (module docstring).
 
         ``cold_check``: a warm plan that is not safe is solved again cold in the worker
         (:func:`~helireach_ros.core.live_reachability.solve_with_cold_check`). The future raises
@@ -224,9 +250,13 @@ class SolverPool:
         future: Future = Future()
         control = None if initial_control is None else np.asarray(initial_control, dtype=float).reshape(-1)
         delay = None if reaction_delay_s is None else float(reaction_delay_s)
-        request = _SolveRequest(np.asarray(state, dtype=float).reshape(-1), warm_start, cold_check, control, delay)
+        weight = self.airframe.gross_weight if gross_weight is None else float(gross_weight)
+        disturbance = None if disturbance is None else np.asarray(disturbance, dtype=float).reshape(-1)
+        request = _SolveRequest(
+            np.asarray(state, dtype=float).reshape(-1), warm_start, cold_check, control, delay, weight, disturbance
+        )
         payload = encode_dataclass(request)
-        job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority)
+        job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority, gross_weight=weight)
         with self._lock:
             if self._closed:
                 raise RuntimeError("the solver pool is closed")
@@ -240,14 +270,15 @@ class SolverPool:
         warm_start: WarmStart | None = None,
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
+        **request: Any,
     ) -> LandingPlan:
-        """Solves and waits: :meth:`submit` then the result.
+        """Solves and waits: :meth:`submit` (``request``: its keyword arguments) then the result.
 
         The wait is bounded (the job's timeout plus :data:`QUEUE_WAIT_LIMIT_S` in the queue, e.g. while a worker
         restarts): beyond it :class:`SolverWorkerError`, so a caller never waits for ever.
         """
         timeout = timeout_s or self.pool_settings.default_timeout_s
-        future = self.submit(state, warm_start, priority, timeout)
+        future = self.submit(state, warm_start, priority, timeout, **request)
         try:
             return future.result(timeout=timeout + QUEUE_WAIT_LIMIT_S)
         except FutureTimeoutError:
@@ -268,6 +299,15 @@ class SolverPool:
         """Workers that have built their NLP and can take a job."""
         with self._lock:
             return sum(worker.ready and worker.process.is_alive() for worker in self._workers)
+
+    def ready_weights(self, every: bool = False) -> set[float]:
+        """Gross weights (N) some ready worker has answered for (``every``: every ready worker): a failure job for
+        one of them goes to a worker that holds it (module docstring). The airframe's weight when none is ready."""
+        with self._lock:
+            held = [worker.weights for worker in self._workers if worker.ready and worker.process.is_alive()]
+        if not held:
+            return {self.airframe.gross_weight}
+        return set.intersection(*held) if every else set.union(*held)
 
     @property
     def busy_workers(self) -> int:
@@ -323,7 +363,8 @@ class SolverPool:
                 _, _, job = heapq.heappop(self._queue)
                 if not job.future.set_running_or_notify_cancel():
                     continue
-                worker = idle.pop()
+                worker = self._pick(idle, job)
+                idle.remove(worker)
                 job.started = time.monotonic()
                 worker.job = job
                 busy_low += priority > PRIORITY_FAILURE
@@ -331,6 +372,14 @@ class SolverPool:
                     worker.connection.send_bytes(job.payload)
                 except OSError:
                     pass  # a dead worker: its sentinel fails the job on the next pass
+
+    @staticmethod
+    def _pick(idle: list[_Worker], job: _Job) -> _Worker:
+        """The idle worker for a job: a failure job one that holds its weight (no NLP built in the failure path),
+        a live job one that lacks it (so every worker builds a new weight before a failure); else the last."""
+        wants_weight = job.priority <= PRIORITY_FAILURE
+        matching = [worker for worker in idle if (job.gross_weight in worker.weights) == wants_weight]
+        return (matching or idle)[-1]
 
     def _replace(self, worker: _Worker, reason: str) -> None:
         """Kills a dead or hung worker, fails its job, starts a new one (ready later, in the background)."""
@@ -403,6 +452,8 @@ class SolverPool:
                 if reply.plan is None:
                     job.future.set_exception(ValueError(reply.error))
                 else:
+                    with self._lock:
+                        worker.weights.add(job.gross_weight)
                     job.future.set_result(reply.plan)
                 return
         if not worker.process.is_alive():

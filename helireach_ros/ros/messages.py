@@ -474,6 +474,9 @@ def plan_status_values(plan: Any) -> dict[str, Any]:
         "reaction_delay_s": plan.reaction_delay_s,
         "initial_thrust_coefficient": float(plan.initial_control[0]),
         "initial_pitch_rad": float(plan.initial_control[1]),
+        "disturbance_descent_acceleration_m_s2": float(plan.disturbance[0]),
+        "disturbance_forward_acceleration_m_s2": float(plan.disturbance[1]),
+        "disturbance_rotor_acceleration_rad_s2": float(plan.disturbance[2]),
         **flyability_values(plan.replay.flyability),
     }
 

@@ -24,6 +24,11 @@ _STATE_KEYS = (
     "initial_distance_m",
     "initial_engine_power_w",
 )
+_DISTURBANCE_KEYS = (
+    "disturbance_descent_acceleration_m_s2",
+    "disturbance_forward_acceleration_m_s2",
+    "disturbance_rotor_acceleration_rad_s2",
+)
 
 
 @dataclass(frozen=True)
@@ -138,7 +143,12 @@ def compare_logged_plans(
         logged_control = [values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")]
         control = None if None in logged_control else np.array([float(value) for value in logged_control])
         delay = float(values["reaction_delay_s"]) if "reaction_delay_s" in values else None
-        plan = planner.plan(state, stored.warm_start if stored is not None else None, control, delay)
+        # the weight the plan was made for (the planner node's estimate, issue 12; older logs: the airframe's)
+        weight = float(values.get("planned_gross_weight_n", airframe.gross_weight))
+        solver = planner if weight == airframe.gross_weight else get_planner(airframe.with_conditions(weight), settings)
+        # the model error the plan was made for (re-plans with estimate_disturbance; older logs: none)
+        disturbance = np.array([float(values.get(key, 0.0)) for key in _DISTURBANCE_KEYS])
+        plan = solver.plan(state, stored.warm_start if stored is not None else None, control, delay, disturbance)
         rerun_times, rerun_values = piecewise_linear_controls(
             plan.control_times, plan.control_values, plan.control_interpolation
         )

@@ -60,6 +60,24 @@ Callbacks only hand work to it (live jobs go to the pool directly, or to the sol
 whatever executor spins the node, even a single-threaded one, state reception, the deadline's fallback and
 status publishing go on during a solve.
 
+**Gross weight** (``estimate_weight``, off by default; :mod:`helireach_ros.core.weight_tracking`). Before a
+failure every rotor reading (Ω, engine power = torque × Ω) with a fresh state (speed, climb rate) is fed to a weight
+tracker: over a short window of steady flight, the weight whose trim power is the measured power, bounded by the
+uncertainty set's weight range (``config/uncertainty.yaml``) widened by ``weight_estimate_error``, quantised to
+``weight_estimate_step``. Live evaluations plan for it (that is where a solver builds a new weight's NLP); at the
+failure the episode's weight is fixed: the latest live evaluation's if a solver holds it, else the nearest one held
+(the file's at worst), and the pool sends the job to a worker that holds it: no NLP is built in the failure path
+(so with ``live_rate`` 0 the file's weight is used).
+Failure plans and re-plans use it. Every plan status names it (``planned_gross_weight_n``, ``gross_weight_source``,
+``gross_weight_reason``); without an estimate (engine power absent, flight not steady, implausible) the file's
+weight is used and the reason says why.
+
+**Model error** (``estimate_disturbance``, on by default; :mod:`helireach_ros.core.disturbance`). From the failure
+plan's state on, each re-plan compares the measured state with the model's prediction over the interval since the
+previous one (from that state, under the current plan's controls) and updates constant disturbance accelerations on
+ẏ, v̇, Ω̇ by ``disturbance_gain`` of the error; the re-plan (NLP and replay) is made for the model plus them, and
+its status reports them. The failure plan itself has none (nothing is known yet).
+
 Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """
 
@@ -84,6 +102,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
+from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.failure_episode import (
     EpisodePhase,
     EpisodeState,
@@ -102,9 +121,18 @@ from helireach_ros.core.plan_verdict import plan_verdict
 from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
 from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.weight_tracking import (
+    WeightChoice,
+    WeightSample,
+    WeightTracker,
+    WeightTrackingSettings,
+    plausible_band,
+    ready_choice,
+)
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.plan_messages import PlanMessages, plan_messages
 from helireach_ros.ros.qos import QosWatch
 
 __all__ = ["LandingPlannerNode", "main"]
@@ -126,7 +154,9 @@ class LandingPlannerNode(Node):
     ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s), ``max_message_age`` (s),
     ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``;
     ``solver_workers`` (0 = solve in this process), ``solve_timeout`` (s, NaN = ``deadline``, ≥ 1 s); ``live_rate``
-    (Hz, 0 = off), ``live_power_fraction``, ``live_max_state_age`` (s), ``standby_max_age`` (s).
+    (Hz, 0 = off), ``live_power_fraction``, ``live_max_state_age`` (s), ``standby_max_age`` (s);
+    ``estimate_weight``, ``weight_estimate_window`` (s), ``weight_estimate_step``, ``weight_estimate_error``;
+    ``estimate_disturbance``, ``disturbance_gain``.
     """
 
     def __init__(self, **node_options: Any) -> None:
@@ -182,6 +212,29 @@ class LandingPlannerNode(Node):
             "standby plan only from a state at most this much older than the failure, s",
             (0.001, 60.0),
         )
+        self._estimate_weight = declare(
+            "estimate_weight", False, "plan for the gross weight estimated from the steady flight before a failure"
+        )
+        self._weight_window = declare(
+            "weight_estimate_window", 1.0, "steady flight averaged for the weight estimate, s", (0.1, 30.0)
+        )
+        self._weight_step = declare(
+            "weight_estimate_step", 0.005, "quantum of the estimated relative weight change", (0.001, 0.05)
+        )
+        self._weight_error = declare(
+            "weight_estimate_error",
+            0.02,
+            "estimates outside the uncertainty set's weight range widened by this fraction are refused",
+            (0.0, 0.2),
+        )
+        self._estimate_disturbance = declare(
+            "estimate_disturbance",
+            True,
+            "re-plan for the model plus the disturbance accelerations learnt from each re-planning interval",
+        )
+        self._disturbance_gain = declare(
+            "disturbance_gain", 0.3, "fraction of each interval's prediction error the estimate takes", (0.01, 1.0)
+        )
         self._live_settings = (
             LiveSettings(
                 rate_hz=live_rate,
@@ -209,16 +262,24 @@ class LandingPlannerNode(Node):
         self._live_generation = 0
         self._live_frame = rm.DEFAULT_BODY_FRAME  # vehicle frame of the standby verdict's state
         self.standby_plans: list[PublishedPlan] = []  # the published standby records (see is_standby)
+        self._standby_messages: PlanMessages | None = None  # the standby's messages, built when its verdict came
 
         self.planner: Any | None = None  # the in-process LandingPlanner, or the SolverPool; None = not configured
         self._pool: SolverPool | None = None
         self.envelope: Any | None = None
         self._setup_error = ""
+        self._weights: WeightTracker | None = None  # None: no estimation (off, or not configured)
+        self._weights_off_reason = "estimate_weight is false"
+        self._built_weights: set[float] = set()  # in-process planners built (solver_workers = 0)
         try:
             self._setup_core(load_aircraft, settings_file, envelope_file, warm_up, solver_workers)
+            self._setup_weight_estimation()
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
+        self._live_weight: WeightChoice | None = None  # the weight of the latest live verdict (the standby's)
+        self._latest_weight: WeightChoice | None = None  # the weight the latest live evaluation was started for
+        self._failure_weight: WeightChoice | None = None  # the current failure episode's weight
 
         # One solve at a time, off the executor: a slow solve must not hold up the deadline or the inputs.
         self._solver_thread = ThreadPoolExecutor(max_workers=1, thread_name_prefix="helireach_solver")
@@ -312,6 +373,44 @@ class LandingPlannerNode(Node):
             f"in {self.startup_s:.2f} s, {where}; {self._envelope_note}"
         )
 
+    def _setup_weight_estimation(self) -> None:
+        """The weight tracker, its band from the uncertainty set; an unreadable set disables it (file's weight)."""
+        self._built_weights = {self.airframe.gross_weight}
+        if not self._estimate_weight:
+            return
+        from helireach_ros.core.uncertainty import load_uncertainty_set
+
+        try:
+            band = plausible_band(load_uncertainty_set(), self._weight_error)
+        except Exception as error:  # a broken uncertainty file must not stop the planner: plan for the file's weight
+            self._weights_off_reason = f"no plausible weight band ({type(error).__name__}: {error})"
+            self.get_logger().error(f"weight estimation off: {self._weights_off_reason}")
+            return
+        settings = WeightTrackingSettings(window_s=self._weight_window, band=band, step=self._weight_step)
+        self._weights = WeightTracker(self.airframe, settings)
+
+    def _weight_now(self) -> WeightChoice:
+        """The weight to plan for now (the tracker's choice, or the file's with the reason)."""
+        with self._lock:
+            if self._weights is None:
+                return WeightChoice(self.airframe.gross_weight, "file", 0.0, self._weights_off_reason)
+            return self._weights.choice(self._now_ns())
+
+    def ready_weights(self) -> set[float]:
+        """Weights a ready solver holds (a failure plan for one builds no NLP)."""
+        if self._pool is not None:
+            return self._pool.ready_weights()
+        with self._lock:
+            return set(self._built_weights)
+
+    def _in_process_planner(self, gross_weight: float) -> Any:
+        """The in-process planner for a weight (built at its first use, then cached by get_planner)."""
+        if gross_weight == self.airframe.gross_weight:
+            return self.planner
+        from helireach_ros.core.planner import get_planner
+
+        return get_planner(self.airframe.with_conditions(gross_weight=gross_weight), self.settings)
+
     def _load_envelope(self, path: str) -> tuple[Any | None, str]:
         if path.strip().lower() == "none":
             return None, "no envelope (disabled): cold starts, autorotation-entry fallback"
@@ -344,8 +443,20 @@ class LandingPlannerNode(Node):
             return
         if rm.state_problems(rm.StateLimits(), rotor=reading):
             return
+        now_ns = self._now_ns()
         with self._lock:
-            self._rotor = (reading, self._now_ns())
+            self._rotor = (reading, now_ns)
+            odometry, failure = self._odometry, self._failure
+            # Steady flight before the failure only (after it the episode's weight is fixed); receive times, as
+            # every freshness check here (a replayed log's stamps are old).
+            before_failure = failure is None or bool(failure.outcome)
+            if self._weights is not None and before_failure and odometry is not None:
+                if now_ns - odometry[1] <= self._state_timeout * 1e9:
+                    state = odometry[0]
+                    sample = WeightSample(
+                        now_ns, state.forward_speed, state.climb_rate, reading.rotor_speed, reading.engine_power
+                    )
+                    self._weights.add(sample)
 
     def current_state(self, measured_power: bool = False) -> tuple[np.ndarray, int, str, str] | None:
         """(state y, v, Ω, h, z, P; its stamp ns; vehicle frame; rotor-speed source), or None without a fresh state.
@@ -403,6 +514,12 @@ class LandingPlannerNode(Node):
             self._failure_count += 1
             failure = FailureEpisode(self._failure_count, failure_stamp_ns, now_ns)
             self._failure = failure
+        # The episode's weight, fixed now: the last live evaluation's (no bisection in the failure callback), one a
+        # solver holds (never an NLP built in the failure path).
+        if self.planner is not None:
+            why = self._weights_off_reason if self._weights is None else "no live evaluation yet (where NLPs are built)"
+            latest = self._latest_weight or WeightChoice(self.airframe.gross_weight, "file", 0.0, why)
+            self._failure_weight = ready_choice(latest, self.airframe.gross_weight, self.ready_weights())
         standby = self._pause_live(failure_stamp_ns)
         if standby is not None and self.planner is not None:
             self._publish_plan(
@@ -414,6 +531,7 @@ class LandingPlannerNode(Node):
                 "measured",
                 replan=False,
                 standby=True,
+                messages=self._standby_messages,
             )
         self.get_logger().warning(f"engine failure #{failure.failure_id}: planning the landing")
         if self.planner is None:
@@ -497,12 +615,21 @@ class LandingPlannerNode(Node):
                 return  # the state is older than live_max_state_age
             failure_now, warm_start = prepared
             generation = self._live_generation
-            done = partial(self._live_done, generation, failure_now, stamp_ns, frame, now_ns)
+            weight = self._weight_now()  # a weight no solver holds yet is built here, before any failure
+            self._latest_weight = weight
+            done = partial(self._live_done, generation, failure_now, stamp_ns, frame, now_ns, weight)
             if self._pool is not None:
                 timeout_s = _LIVE_TIMEOUT_FACTOR * self._solve_timeout
                 try:
                     job = self._pool.submit(
-                        failure_now, warm_start, PRIORITY_LIVE, timeout_s, True, None, self._reaction_delay
+                        failure_now,
+                        warm_start,
+                        PRIORITY_LIVE,
+                        timeout_s,
+                        True,
+                        None,
+                        self._reaction_delay,
+                        weight.gross_weight,
                     )
                 except RuntimeError:  # the pool is closed: the node is being destroyed
                     return
@@ -510,20 +637,31 @@ class LandingPlannerNode(Node):
         if self._pool is not None:
             job.add_done_callback(done)  # outside the lock: a job already done calls back at once, here
             return
-        self._submit(self._live_in_process, done, failure_now, warm_start)  # skipped while a solve runs
+        self._submit(self._live_in_process, done, failure_now, warm_start, weight)  # skipped while a solve runs
 
-    def _live_in_process(self, done: Callable[[Future], None], state: np.ndarray, warm_start: Any) -> None:
+    def _live_in_process(
+        self, done: Callable[[Future], None], state: np.ndarray, warm_start: Any, weight: WeightChoice
+    ) -> None:
         """Without a pool: the live solve on the solver thread (cold check as in the workers)."""
         future: Future = Future()
         try:
-            solve = partial(self.planner.plan, reaction_delay_s=self._reaction_delay)
+            solve = partial(self._in_process_planner(weight.gross_weight).plan, reaction_delay_s=self._reaction_delay)
             future.set_result(solve_with_cold_check(solve, state, warm_start))
+            with self._lock:
+                self._built_weights.add(weight.gross_weight)
         except (ValueError, RuntimeError) as error:
             future.set_exception(error)
         done(future)
 
     def _live_done(
-        self, generation: int, state: np.ndarray, stamp_ns: int, frame: str, started_ns: int, future: Future
+        self,
+        generation: int,
+        state: np.ndarray,
+        stamp_ns: int,
+        frame: str,
+        started_ns: int,
+        weight: WeightChoice,
+        future: Future,
     ) -> None:
         """Records a finished live solve and publishes its verdict (runs on the pool's or the solver thread)."""
         try:
@@ -535,12 +673,18 @@ class LandingPlannerNode(Node):
                 if generation != self._live_generation or self._live is None:
                     return  # a failure started (or the evaluator was reset) meanwhile: not evidence any more
                 verdict = self._live.record(state, stamp_ns, started_ns, self._now_ns(), plan, error)
+                self._live_weight = weight  # the standby, if any, is this latest verdict
                 standby = self._live.standby_verdict is verdict
                 if standby:
                     self._live_frame = frame  # the vehicle frame of the standby's state
-                self._live_publisher.publish(self._live_status(verdict, standby))
+                self._live_publisher.publish(self._live_status(verdict, standby, weight))
+            if standby:  # its messages now, off the executor and outside the lock: the failure only publishes them
+                messages = plan_messages(verdict.plan, stamp_ns, frame, self._world_frame)
+                with self._live_lock:
+                    if generation == self._live_generation:
+                        self._standby_messages = messages
 
-    def _live_status(self, verdict: LiveVerdict, standby: bool) -> DiagnosticStatus:
+    def _live_status(self, verdict: LiveVerdict, standby: bool, weight: WeightChoice) -> DiagnosticStatus:
         """The ``/helireach/live_reachability`` message of a verdict (msg_docs/helireach_live_reachability.md)."""
         plan = verdict.plan
         verified = plan is not None and plan.verified
@@ -562,6 +706,7 @@ class LandingPlannerNode(Node):
             "height_m": verdict.state[3],
             "distance_m": verdict.state[4],
             "engine_power_w": verdict.state[5],
+            **self._weight_values(weight),
         }
         if plan is None:
             level, text = DiagnosticStatus.ERROR, f"LIVE ERROR: no verdict ({verdict.reason})"
@@ -636,23 +781,35 @@ class LandingPlannerNode(Node):
             if not ((retry and failure.published) or self._standby_is_current(failure)):
                 self._publish_fallback(failure, state, stamp_ns, reason)  # a verified standby beats a fallback
             return
+        if self._estimate_disturbance and failure.disturbance is None:  # the first interval starts at this state
+            model = self.airframe.with_conditions(gross_weight=self.episode_weight.gross_weight)
+            failure.disturbance = DisturbanceTracker(model, DisturbanceSettings(gain=self._disturbance_gain))
+            failure.disturbance.update(stamp_ns * 1e-9, state, _controls_from_stamp(plan, stamp_ns))
         self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False)
 
     def _solve(
-        self, state: np.ndarray, warm_start: Any, initial_control: Any = None, reaction_delay_s: float | None = None
+        self,
+        state: np.ndarray,
+        warm_start: Any,
+        initial_control: Any = None,
+        reaction_delay_s: float | None = None,
+        disturbance: np.ndarray | None = None,
     ) -> tuple[Any | None, str]:
         """A failure plan or re-plan (blocking; on the solver thread): (plan, "") or (None, why not).
 
         ``initial_control``/``reaction_delay_s``: None for a failure plan (trim before the failure, the node's
-        reaction delay); a re-plan passes the control being flown and 0.
+        reaction delay); a re-plan passes the control being flown and 0, and the disturbance estimate.
         """
         delay = self._reaction_delay if reaction_delay_s is None else reaction_delay_s
+        weight = self.episode_weight.gross_weight  # one the solvers hold (fixed at the failure)
         try:
             if self._pool is None:
-                return self.planner.plan(state, warm_start, initial_control, delay), ""
+                planner = self._in_process_planner(weight)
+                return planner.plan(state, warm_start, initial_control, delay, disturbance=disturbance), ""
             future = self._pool.submit(
-                state, warm_start, PRIORITY_FAILURE, self._solve_timeout, False, initial_control, delay
-            )
+                state, warm_start, PRIORITY_FAILURE, self._solve_timeout, False, initial_control, delay, weight,
+                disturbance,
+            )  # fmt: skip
             try:
                 # The pool fails the job solve_timeout after a worker took it; the extra wait covers the queue.
                 return future.result(timeout=self._solve_timeout + _QUEUE_WAIT_S), ""
@@ -711,7 +868,10 @@ class LandingPlannerNode(Node):
             return
         # from the control being flown at the state's stamp (the flyable controls stay continuous), no delay
         flying = previous.plan.controls_at([(stamp_ns - previous.stamp_ns) * 1e-9])[:, 0]
-        plan, error = self._solve(state, previous.plan.warm_start, flying, 0.0)
+        # what the last interval taught of the model's error (the current plan's controls were flown in it)
+        flown = _controls_from_stamp(previous.plan, previous.stamp_ns)
+        disturbance = failure.disturbance.update(stamp_ns * 1e-9, state, flown) if failure.disturbance else None
+        plan, error = self._solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
         if plan is None or not plan.solver.success:
             failure.replans_failed += 1
             reason = error or f"solver {plan.solver.status}"
@@ -784,7 +944,30 @@ class LandingPlannerNode(Node):
             "after_fallback": lateness.after_fallback,
         }
 
-    def _common_values(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int) -> dict[str, Any]:
+    @property
+    def episode_weight(self) -> WeightChoice:
+        """The gross weight the current (or last) failure episode plans for (the file's before any failure)."""
+        weight = self._failure_weight
+        return weight if weight is not None else WeightChoice(self.airframe.gross_weight, "file", 0.0, "no failure")
+
+    def _weight_values(self, weight: WeightChoice) -> dict[str, Any]:
+        """The status keys of the weight a plan was made for (msg_docs/helireach_plan_status.md); ``gross_weight_n``
+        stays the configured aircraft's (the recorder's run metadata adopts it)."""
+        return {
+            "gross_weight_n": self.airframe.gross_weight,
+            "planned_gross_weight_n": weight.gross_weight,
+            "gross_weight_source": weight.source,
+            "gross_weight_change": weight.relative_change,
+            "gross_weight_estimate_change": weight.estimated_change,
+            "gross_weight_reason": weight.reason,
+        }
+
+    def _common_values(
+        self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, weight: WeightChoice | None = None
+    ) -> dict[str, Any]:
+        """Keys of every plan status; ``weight`` None: a fallback (the file's model)."""
+        if weight is None:
+            weight = WeightChoice(self.airframe.gross_weight, "file", 0.0, "fallback controls from the file's model")
         return {
             "failure_id": failure.failure_id,
             "failure_stamp_ns": failure.event_stamp_ns,
@@ -796,7 +979,7 @@ class LandingPlannerNode(Node):
             "initial_distance_m": state[4],
             "initial_engine_power_w": state[5],
             "airframe": self.airframe.name,
-            "gross_weight_n": self.airframe.gross_weight,
+            **self._weight_values(weight),
             "density_altitude_m": self.airframe.density_altitude,
             "envelope_id": self.envelope.envelope_id if self.envelope is not None else "",
         }
@@ -811,11 +994,15 @@ class LandingPlannerNode(Node):
         rotor_source: str,
         replan: bool,
         standby: bool = False,
+        messages: PlanMessages | None = None,
     ) -> None:
         """Publishes a converged plan (safe, unverified or unsafe) as trajectory, path and status.
 
         ``standby``: the live verdict's plan published on the failure (flagged so; the refined plan replaces it).
+        ``messages``: its trajectory and path built beforehand (used only if they match plan, stamp and frames).
         """
+        live_weight = self._live_weight or WeightChoice(self.airframe.gross_weight, "file", 0.0, "")
+        weight = live_weight if standby else self.episode_weight
         with self._publish_lock:
             if failure is not self._failure or failure.outcome:
                 return  # a newer failure superseded this one, or it ended, while solving
@@ -838,10 +1025,10 @@ class LandingPlannerNode(Node):
                 now_ns,
                 warm_source,
             )
-            self._trajectory_publisher.publish(rm.trajectory_message(plan, stamp_ns, frame))
-            self._path_publisher.publish(
-                rm.path_message(plan.times, plan.states, stamp_ns, self._world_frame, plan.controls[1])
-            )
+            if messages is None or not messages.matches(plan, stamp_ns, frame, self._world_frame):
+                messages = plan_messages(plan, stamp_ns, frame, self._world_frame)
+            self._trajectory_publisher.publish(messages.trajectory)
+            self._path_publisher.publish(messages.path)
             values = {
                 **rm.plan_status_values(plan),
                 "standby": standby,
@@ -850,7 +1037,7 @@ class LandingPlannerNode(Node):
                 **self._lateness_values(lateness),
                 "latency_ms": record.latency_ms,
                 "rotor_speed_source": rotor_source,
-                **self._common_values(failure, plan.initial_state, stamp_ns),
+                **self._common_values(failure, plan.initial_state, stamp_ns, weight),
             }
             level_name, text = plan_verdict(plan, rotor_source)
             if standby:
@@ -927,6 +1114,14 @@ class LandingPlannerNode(Node):
             "failure_episode": self._episode.phase.value,
             "solver_workers": self._pool.pool_settings.workers if self._pool is not None else 0,
             "solve_timeout_s": self._solve_timeout,
+            "ready_weights": len(self.ready_weights()),
+        }
+        weight_now = self._weight_now()
+        values |= {
+            "weight_estimate_n": weight_now.gross_weight,
+            "weight_estimate_source": weight_now.source,
+            "weight_estimate_change": weight_now.relative_change,
+            "weight_estimate_reason": weight_now.reason,
         }
         problems: list[str] = []
         no_worker = False
@@ -968,6 +1163,12 @@ class LandingPlannerNode(Node):
         )
         status = rm.diagnostic_status(level, f"{self.get_name()}: planner", text, self.airframe.name, values)
         self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
+
+
+def _controls_from_stamp(plan: Any, stamp_ns: int) -> Callable[[float], np.ndarray]:
+    """A plan's controls as a function of time in seconds (the plan starts at its state's stamp)."""
+    start = stamp_ns * 1e-9
+    return lambda time: plan.controls_at([time - start])[:, 0]
 
 
 def main(args: list[str] | None = None) -> None:

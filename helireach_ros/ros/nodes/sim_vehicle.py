@@ -8,7 +8,9 @@ vehicle would: ``/vehicle/odometry``, ``/vehicle/rotor`` and ``/vehicle/engine_f
 (holding the trim controls until the first arrives; the trajectory's header stamp is its time 0).
 At touchdown it publishes ``/helireach/touchdown`` (``diagnostic_msgs/DiagnosticStatus``, latched):
 OK when the landing met the limits, ERROR otherwise, with descent rate, forward speed and rotor
-speed. Time 0 of the scenario is the first timer tick.
+speed. Time 0 of the scenario is the first timer tick. ``mismatch`` (a preset of
+:mod:`helireach_ros.core.mismatch_presets`, e.g. ``weight+5``; '' = the scenario's own) replaces the scenario's
+parameter mismatch: the vehicle flies it, the planner is not told.
 
 Run: ``python -m helireach_ros.ros.nodes.sim_vehicle --ros-args -p scenario:=demo_500ft_75kt``.
 """
@@ -27,14 +29,16 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
 
+from helireach_ros.core.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset
 from helireach_ros.core.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import declare_checked_parameter
+from helireach_ros.ros.parameters import ParameterError, declare_checked_parameter
 
 __all__ = ["SimVehicleNode", "main", "touchdown_status"]
 
+_MISMATCH_CHOICES = ", ".join(MISMATCH_PRESET_NAMES)
 _MAX_STEP_S = 0.5  # a stalled timer must not make the vehicle jump further than this in one go
 # The trajectory subscription: reliable, volatile (a newer plan is what matters; matches latched publishers).
 _TRAJECTORY_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
@@ -74,18 +78,23 @@ def touchdown_status(report: TouchdownReport, vehicle: SimulatedVehicle, name: s
 class SimVehicleNode(Node):
     """Publishes a simulated vehicle's sensors and follows the landing trajectory after a failure.
 
-    Parameters: ``scenario`` (name in config/scenarios or a file), ``publish_period`` (s),
+    Parameters: ``scenario`` (name in config/scenarios or a file), ``mismatch`` (preset, '' = the scenario's),
+    ``publish_period`` (s),
     ``world_frame``, ``body_frame``, ``rotor_joint``, ``publish_engine_power`` (rotor effort),
     ``diagnostics_period`` (s).
 
     Raises:
         ConfigError: the scenario cannot be loaded (a simulator without a scenario has nothing to fly).
+        ParameterError: an unknown ``mismatch`` preset.
     """
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_sim_vehicle", **node_options)
         declare = partial(declare_checked_parameter, self)
         scenario_name = declare("scenario", "demo_500ft_75kt", "scenario name (config/scenarios) or file")
+        mismatch = declare(
+            "mismatch", "", f"model mismatch preset flown instead of the scenario's ('' = its own; {_MISMATCH_CHOICES})"
+        )
         publish_period = declare("publish_period", 0.04, "sensor publishing (and integration) period, s", (1e-3, 1.0))
         self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "odometry frame")
         self._body_frame = declare("body_frame", rm.DEFAULT_BODY_FRAME, "vehicle frame (gravity/heading aligned)")
@@ -94,6 +103,11 @@ class SimVehicleNode(Node):
         diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
 
         self.scenario = load_scenario(scenario_name)
+        if mismatch:
+            try:
+                self.scenario = apply_mismatch_preset(self.scenario, mismatch)
+            except ValueError as error:
+                raise ParameterError(f"parameter 'mismatch' of {self.get_name()}: {error}") from None
         self.vehicle = SimulatedVehicle(self.scenario)
         self._lock = threading.Lock()
         self._start_ns: int | None = None
