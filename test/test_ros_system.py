@@ -86,6 +86,7 @@ def test_the_replans_are_made_for_the_model_error_learnt_in_flight(demo) -> None
     ]
     replanned = [values for values in logged if values.get("replan_index", "0") != "0"]
     assert replanned and any(float(values["disturbance_descent_acceleration_m_s2"]) != 0.0 for values in replanned)
+    assert "model error learnt by the last: d_y" in summary(demo)
 
 
 def test_the_log_holds_every_topic_and_the_run_metadata(demo) -> None:

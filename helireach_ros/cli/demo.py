@@ -260,7 +260,17 @@ def summary(result: DemoResult) -> str:
         after = f"{standby.latency_ms:.0f} ms after the failure"
         lines.append(f"  standby plan              : published {after}, {verified}")
     replans = max((record.replan_index for record in result.plans), default=0)
-    lines.append(f"  closed loop               : {replans} re-plans from the current state")
+    learnt = next(
+        (record.plan.disturbance for record in reversed(result.plans) if record.replan_index and not record.fallback),
+        None,
+    )
+    error = (
+        f"; model error learnt by the last: d_y {learnt[0]:+.2f} m/s², d_v {learnt[1]:+.2f} m/s², "
+        f"d_Ω {learnt[2]:+.2f} rad/s²"
+        if learnt is not None and np.any(learnt)
+        else ""
+    )
+    lines.append(f"  closed loop               : {replans} re-plans from the current state{error}")
     touchdown = result.touchdown
     if touchdown is None:
         lines.append("  touchdown                 : none (timeout)")

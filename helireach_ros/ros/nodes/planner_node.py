@@ -870,7 +870,8 @@ class LandingPlannerNode(Node):
         flying = previous.plan.controls_at([(stamp_ns - previous.stamp_ns) * 1e-9])[:, 0]
         # what the last interval taught of the model's error (the current plan's controls were flown in it)
         flown = _controls_from_stamp(previous.plan, previous.stamp_ns)
-        disturbance = failure.disturbance.update(stamp_ns * 1e-9, state, flown) if failure.disturbance else None
+        tracker = failure.disturbance
+        disturbance = tracker.update(stamp_ns * 1e-9, state, flown) if tracker is not None else None
         plan, error = self._solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
         if plan is None or not plan.solver.success:
             failure.replans_failed += 1
