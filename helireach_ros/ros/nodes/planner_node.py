@@ -781,11 +781,12 @@ class LandingPlannerNode(Node):
             if not ((retry and failure.published) or self._standby_is_current(failure)):
                 self._publish_fallback(failure, state, stamp_ns, reason)  # a verified standby beats a fallback
             return
-        if self._estimate_disturbance and failure.disturbance is None:  # the first interval starts at this state
-            model = self.airframe.with_conditions(gross_weight=self.episode_weight.gross_weight)
-            failure.disturbance = DisturbanceTracker(model, DisturbanceSettings(gain=self._disturbance_gain))
-            failure.disturbance.update(stamp_ns * 1e-9, state, _controls_from_stamp(plan, stamp_ns))
         self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False)
+        if self._estimate_disturbance and failure.disturbance is None:  # after publishing: off the failure path
+            weight = self.episode_weight.gross_weight
+            model = self.airframe if weight == self.airframe.gross_weight else self.airframe.with_conditions(weight)
+            failure.disturbance = DisturbanceTracker(model, DisturbanceSettings(gain=self._disturbance_gain))
+            failure.disturbance.update(stamp_ns * 1e-9, state, _controls_from_stamp(plan, stamp_ns))  # 1st interval
 
     def _solve(
         self,
