@@ -21,6 +21,7 @@ from helireach_ros.core.model import disturbed_dynamics_function, dynamics_funct
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.robust_verification import model_vehicle
 from helireach_ros.core.simulation import ControlSchedule, Scenario, SimulatedVehicle, load_scenario
+from helireach_ros.core.transcription.base import DecodedPlan
 from helireach_ros.core.uncertainty import PerturbedModel
 from helireach_ros.core.units import FT, KT
 from helireach_ros.core.verification import replay_plan
@@ -67,8 +68,7 @@ def test_a_plan_for_a_disturbance_is_replayed_in_the_disturbed_model(planner, ai
 
 
 def _decoded(plan):
-    from helireach_ros.core.transcription.base import DecodedPlan
-
+    """The plan's decoded NLP solution, to replay it again."""
     return DecodedPlan(
         plan.time_to_land, plan.times, plan.states, plan.control_times, plan.control_values,
         plan.control_interpolation, plan.curve_times, plan.curve_states,
