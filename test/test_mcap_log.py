@@ -27,11 +27,12 @@ from mcap.exceptions import McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap_ros2.decoder import DecoderFactory
 from nav_msgs.msg import Odometry
+from rcl_interfaces.msg import Log
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -388,6 +389,40 @@ def test_recorder_round_trip_read_by_three_readers(ros_context: Context, tmp_pat
     rb_odom = [msg for topic, msg in rb_messages if topic == ODOM]
     assert [o.pose.pose.position.z for o in rb_odom] == [150.0, 149.0, 148.0, 147.0, 146.0]
     assert [msg.joint_names for topic, msg in rb_messages if topic == TRAJ] == [["x", "h", "u"]]
+
+
+def test_recorder_reports_a_publisher_it_cannot_hear_with_one_event_handler_per_topic(
+    ros_context: Context, tmp_path: Path
+) -> None:
+    """A best-effort publisher appearing on a topic the recorder subscribed reliably is an ERROR line (its messages
+    are not logged); the recorder registers one QoS-event handler per recorded topic, not rclpy's default set."""
+    ctx = ros_context
+    talker = Node("talker", context=ctx)
+    reliable = talker.create_publisher(Bool, FAILURE, qos_profile(VOLATILE))
+    recorder = McapRecorder(context=ctx, parameter_overrides=[Parameter("log_dir", value=str(tmp_path))])
+    listener = Node("rosout_listener", context=ctx)
+    errors: list[str] = []
+    listener.create_subscription(
+        Log, "/rosout", lambda log: errors.append(log.msg) if log.name == recorder.get_name() else None, 100
+    )
+    executor = SingleThreadedExecutor(context=ctx)
+    for node in (talker, recorder, listener):
+        executor.add_node(node)
+
+    def spin() -> None:
+        executor.spin_once(timeout_sec=0.05)
+
+    try:
+        wait_for(lambda: reliable.get_subscription_count() > 0, 10, spin, "the recorder's subscription")
+        assert recorder.recorded_topics == [FAILURE]
+        assert len(recorder._subscriptions_by_topic[FAILURE].event_handlers) == 1  # incompatible QoS only
+        talker.create_publisher(Bool, FAILURE, QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+        wait_for(lambda: any("incompatible QoS" in text for text in errors), 10, spin, "the recorder's error")
+    finally:
+        executor.shutdown()
+        for node in (recorder, talker, listener):
+            node.destroy_node()
+    assert any(FAILURE in text and "RELIABILITY" in text for text in errors), errors
 
 
 def talker_in(ctx: Context) -> tuple[Node, SingleThreadedExecutor]:

@@ -100,13 +100,14 @@ def test_a_failure_in_the_composed_system_gives_the_prebuilt_standby_then_the_re
         # the standby went out as the very messages built beforehand (the failure callback only published them)
         (trajectory, prebuilt), (path, prebuilt_then) = trajectories[0], paths[0]
         assert prebuilt is not None and prebuilt_then is prebuilt
-        assert trajectory is prebuilt.trajectory and path is prebuilt.path
+        assert trajectory is prebuilt.trajectory_cdr and path is prebuilt.path_cdr
         standby_record = planner.published_plans[0]
         assert prebuilt.matches(standby_record.plan, standby_record.stamp_ns, prebuilt.frame, prebuilt.world_frame)
         assert int(first["state_stamp_ns"]) == prebuilt.stamp_ns
         assert vehicle.trajectories[0] == prebuilt.trajectory
         # the refined plan's messages are built for it
-        assert trajectories[1][0] is not prebuilt.trajectory and vehicle.trajectories[1] == trajectories[1][0]
+        refined_trajectory = deserialize_message(trajectories[1][0], JointTrajectory)
+        assert trajectories[1][0] is not prebuilt.trajectory_cdr and vehicle.trajectories[1] == refined_trajectory
         system.drain()  # the recorder's copies still queued (as `helireach bringup` does before shutting down)
     finally:
         system.shutdown()

@@ -6,8 +6,9 @@ files, which win), creates the MCAP recorder first, then the monitor, envelope s
 nodes, optionally the simulated vehicle and any extra nodes (e.g. the cockpit display), and waits (at
 most 2 s) until the recorder has matched every publisher, so the log starts with the vehicle's first
 message; the recorder's metadata names the airframe, envelope, software version and scenario. One
-single-threaded executor spins them all by default (:mod:`helireach_ros.ros.executors`); the planner
-solves on its own thread, so no callback blocks the others.
+single-threaded executor spins them all by default (:mod:`helireach_ros.ros.executors`), serving them in the
+order of :attr:`HelireachSystem.nodes` (the failure path first, the recorder last); the planner solves on its own
+thread, so no callback blocks the others.
 
 ``helireach bringup [--params-file F] [--with-sim] [--executor KIND]`` (:func:`run_bringup`) spins
 until Ctrl-C or SIGTERM and then finishes the log. Each node also has its own console script for
@@ -44,6 +45,7 @@ from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 from helireach_ros.ros.nodes.recorder import McapRecorder
 from helireach_ros.ros.nodes.sim_vehicle import SimVehicleNode
 from helireach_ros.ros.parameters import warn_unknown_parameters_of_system
+from helireach_ros.ros.qos import drop_parameter_event_handlers
 
 __all__ = [
     "DEFAULT_EXECUTOR",
@@ -87,10 +89,12 @@ class HelireachSystem:
 
     @property
     def nodes(self) -> list[Node]:
-        """Every node, the recorder last."""
-        nodes: list[Node] = [self.monitor, self.envelope_status, self.planner]
+        """Every node, in the order the executor serves them after a wait: the failure path (monitor, planner),
+        the trajectory's consumers (simulated vehicle, extra nodes), the safety status, the recorder last."""
+        nodes: list[Node] = [self.monitor, self.planner]
         nodes += [self.sim] if self.sim is not None else []
         nodes += self.extra
+        nodes += [self.envelope_status]
         nodes += [self.recorder] if self.recorder is not None else []
         return nodes
 
@@ -255,6 +259,7 @@ def build_system(
         raise
     system = HelireachSystem(context, spinner, monitor, envelope_status, planner, sim, recorder, extra)
     for node in system.nodes:
+        drop_parameter_event_handlers(node)
         spinner.add_node(node)
     warn_unknown_parameters_of_system(system.nodes)  # a misspelt -p is otherwise silently ignored
     return system

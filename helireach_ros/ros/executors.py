@@ -3,8 +3,11 @@
 The composed system (:mod:`helireach_ros.ros.bringup`, the demo) and the per-node console scripts take an
 executor *kind*:
 
-- ``single_threaded`` (the default): rclpy's ``SingleThreadedExecutor``. No helireach callback blocks
-  (the planner solves on a thread of its own), so one thread serves every node.
+- ``single_threaded`` (the default): rclpy's ``SingleThreadedExecutor``, serving its nodes in the order they
+  were added (:mod:`helireach_ros.ros.added_order_executor`). No helireach callback blocks (the planner
+  solves on a thread of its own), so one thread serves every node. After each wait the ready callbacks run
+  node by node, so the composed system's order is its priority: the failure path (monitor, planner) and the
+  trajectory's consumers before the status and the recorder (``HelireachSystem.nodes``).
 - ``events``: rclpy's C++ ``EventsExecutor``, experimental in Jazzy. It dispatches from middleware
   events instead of rebuilding a wait set in Python on every wake-up and uses the least CPU, but the
   7.1 wheels carry known crash bugs (ros2/rclpy#1644, #1718), so it is opt-in.
@@ -53,9 +56,9 @@ def create_executor(kind: str, context: Any = None) -> Any:
 
         return EventsExecutor(context=context)
     if kind == "single_threaded":
-        from rclpy.executors import SingleThreadedExecutor
+        from helireach_ros.ros.added_order_executor import AddedOrderExecutor
 
-        return SingleThreadedExecutor(context=context)
+        return AddedOrderExecutor(context=context)
     raise ValueError(f"unknown executor kind {kind!r}; expected one of {', '.join(EXECUTOR_KINDS)}")
 
 
@@ -129,6 +132,7 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
     from rclpy.signals import SignalHandlerOptions
 
     from helireach_ros.ros.parameters import ParameterError, warn_unknown_parameters
+    from helireach_ros.ros.qos import drop_parameter_event_handlers
 
     # rclpy's own SIGINT and SIGTERM handlers wake the blocked executor and make spin() raise, so the
     # node is destroyed (the recorder finishes its log); a Python signal.signal() handler would only
@@ -141,6 +145,7 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
     node = None
     try:
         node = node_class()
+        drop_parameter_event_handlers(node)
         warn_unknown_parameters(node)
         executor = create_executor(DEFAULT_EXECUTOR)
         executor.add_node(node)

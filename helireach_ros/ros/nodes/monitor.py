@@ -36,6 +36,7 @@ from helireach_ros.core.failure_episode import (
     EpisodeTransition,
 )
 from helireach_ros.core.input_contract import OUT_OF_ORDER, WRONG_FRAME, FrameContract, InputGate
+from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_checked_parameter
@@ -214,10 +215,13 @@ class VehicleMonitor(Node):
             with self._lock:
                 frame = self._vehicle_frame
             self._event_publisher.publish(Header(stamp=rm.stamp_message(state.started_ns), frame_id=frame))
-            self.get_logger().warning(f"ENGINE FAILURE: episode {state.episode_id}, failure event published")
-        else:
-            self.get_logger().warning(f"failure episode: {transition.previous.value} -> {state.text}")
         self._publish_episode(state)
+        # the log line after the messages: nothing downstream waits for it
+        if transition.started:
+            text = f"ENGINE FAILURE: episode {state.episode_id}, failure event published"
+        else:
+            text = f"failure episode: {transition.previous.value} -> {state.text}"
+        fast_logging.warning(self.get_logger(), text)
 
     def _publish_episode(self, state: EpisodeState) -> None:
         values = {**state.as_values(), "recovery_hold_s": self._episode_settings.recovery_hold}

@@ -129,6 +129,7 @@ from helireach_ros.core.weight_tracking import (
     plausible_band,
     ready_choice,
 )
+from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
@@ -533,11 +534,11 @@ class LandingPlannerNode(Node):
                 standby=True,
                 messages=self._standby_messages,
             )
-        self.get_logger().warning(f"engine failure #{failure.failure_id}: planning the landing")
         if self.planner is None:
             self._publish_status_only(failure, f"planner not configured ({self._setup_error})")
             return
         self._submit(self._plan_initial, failure, queue=True)
+        fast_logging.warning(self.get_logger(), f"engine failure #{failure.failure_id}: planning the landing")
 
     def _stop_failure(self, failure: FailureEpisode, outcome: EpisodePhase, state: EpisodeState) -> None:
         """Stops planning for ``failure``; on ENDED the plan status says so (the last plan no longer applies)."""
@@ -568,9 +569,10 @@ class LandingPlannerNode(Node):
                     )
                 )
         self._pause_live()  # forget the verdicts from before and during the episode; evaluation resumes afresh
-        self.get_logger().warning(
+        fast_logging.warning(
+            self.get_logger(),
             f"failure #{failure.failure_id}: episode {outcome.value}; planning stopped "
-            f"({failure.replans} re-plans, {failure.replans_failed} failed)"
+            f"({failure.replans} re-plans, {failure.replans_failed} failed)",
         )
 
     # -- live evaluation -----------------------------------------------------------------------------------------
@@ -1029,8 +1031,8 @@ class LandingPlannerNode(Node):
             )
             if messages is None or not messages.matches(plan, stamp_ns, frame, self._world_frame):
                 messages = plan_messages(plan, stamp_ns, frame, self._world_frame)
-            self._trajectory_publisher.publish(messages.trajectory)
-            self._path_publisher.publish(messages.path)
+            self._trajectory_publisher.publish(messages.trajectory_cdr)
+            self._path_publisher.publish(messages.path_cdr)
             values = {
                 **rm.plan_status_values(plan),
                 "standby": standby,
@@ -1056,7 +1058,7 @@ class LandingPlannerNode(Node):
                 self.standby_plans.append(record)
                 del self.standby_plans[:-_PLAN_HISTORY]
         if not replan:
-            self.get_logger().info(f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
+            fast_logging.info(self.get_logger(), f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
 
     def _publish_status_only(self, failure: FailureEpisode, text: str) -> None:
         self.get_logger().error(f"failure #{failure.failure_id}: {text}")

@@ -50,6 +50,7 @@ from helireach_ros.core.mcap_log.run_metadata import aircraft_metadata, status_m
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.qos import QosWatch
 
 __all__ = [
     "DEFAULT_TOPICS",
@@ -197,6 +198,9 @@ class McapRecorder(Node):
             _new_log_path(directory), metadata=known, chunk_size=chunk_size, max_chunk_age=max_chunk_age
         )
         self._subscriptions_by_topic: dict[str, Subscription] = {}
+        # One incompatible-QoS handler per subscription (an ERROR line: that publisher's messages are not logged),
+        # not rclpy's default two: each is a waitable the composed system's executor re-adds on every wait.
+        self._qos_watch = QosWatch(self, publish=False)
         self._warned_types: set[str] = set()
         self._unreadable_status: set[str] = set()
         self._discovery_timer: Timer | None = self.create_timer(_DISCOVERY_PERIOD_S, self._discover)
@@ -296,7 +300,7 @@ class McapRecorder(Node):
             except McapLogError as exc:
                 self.get_logger().error(f"not recording {topic}: {exc}")
                 continue
-            self._subscriptions_by_topic[topic] = self.create_subscription(
+            self._subscriptions_by_topic[topic] = self._qos_watch.create_subscription(
                 msg_class, topic, partial(self._on_message, topic), _request_qos(topic, publishers), raw=True
             )
         if not self._pending and self._discovery_timer is not None:
