@@ -11,7 +11,8 @@ landing trajectory stamped with that state. The path is the product's: vehicle f
 failure event → planner (warm start from the envelope, IPOPT, independent replay) → trajectory → back.
 
 * ``composed``: monitor, envelope status, planner and MCAP recorder in this process under bringup's
-  executor (``--executor``, default single-threaded); the bench's node shares the executor.
+  executor (``--executor``, default single-threaded); the bench's node shares the executor as one of the
+  system's extra nodes (``build_system(extra_nodes=...)``, where a vehicle bridge or the display composes in).
 * ``cross-process``: ``helireach bringup`` in a child process (LOCALHOST discovery, a random domain
   id); the DDS transport is paid both ways.
 
@@ -70,13 +71,16 @@ _NO_CONVERGENCE_S = 3.0  # after a fallback: give up waiting for a converged pla
 class Vehicle:
     """The bench's side: streams a state, raises the failure flag, receives trajectories and plan statuses."""
 
-    def __init__(self, context: Context, executor: Executor) -> None:
-        self.node = Node("bench_vehicle", context=context)
+    def __init__(self, node: Node, executor: Executor) -> None:
+        self.node = node
         self.executor = executor
-        executor.add_node(self.node)
-        self.odometry = self.node.create_publisher(Odometry, rm.TOPIC_ODOMETRY, rm.STREAM_QOS)
-        self.rotor = self.node.create_publisher(JointState, rm.TOPIC_ROTOR, rm.STREAM_QOS)
-        self.failure = self.node.create_publisher(Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS)
+        executor.add_node(self.node)  # no-op when it is already one of the composed system's nodes
+        # No QoS event handlers on the bench's own endpoints: in the composed system they would be waited on with
+        # the nodes' (one wait-set entry each, rebuilt in Python on every wake-up) and slow the system it measures.
+        quiet_publisher, quiet_subscription = rm.NO_QOS_EVENTS_PUBLISHER, rm.NO_QOS_EVENTS_SUBSCRIPTION
+        self.odometry = self.node.create_publisher(Odometry, rm.TOPIC_ODOMETRY, rm.STREAM_QOS, **quiet_publisher)
+        self.rotor = self.node.create_publisher(JointState, rm.TOPIC_ROTOR, rm.STREAM_QOS, **quiet_publisher)
+        self.failure = self.node.create_publisher(Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS, **quiet_publisher)
         self.arrivals: list[tuple[float, JointTrajectory]] = []
         self.statuses: list[dict[str, str]] = []
         self.node.create_subscription(
@@ -84,12 +88,14 @@ class Vehicle:
             rm.TOPIC_LANDING_TRAJECTORY,
             lambda message: self.arrivals.append((time.perf_counter(), message)),
             rm.STREAM_QOS,
+            **quiet_subscription,
         )
         self.node.create_subscription(
             DiagnosticStatus,
             rm.TOPIC_PLAN_STATUS,
             lambda message: self.statuses.append(rm.status_values(message)),
             rm.STREAM_QOS,
+            **quiet_subscription,
         )
         self.stamps: set[int] = set()
         self.details: list[tuple[float, float, int]] = []  # (IPOPT ms, planner event->publish ms, iterations)
@@ -203,9 +209,17 @@ def _run(vehicle: Vehicle, states: list[tuple[float, float]]) -> dict[str, list]
 def run_composed(states: list[tuple[float, float]], log_dir: str, executor: str, extra: list[str]) -> dict[str, list]:
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
     arguments = [*_NO_REPLANNING, *extra]
-    system = build_system(log_dir=log_dir, ros_args=arguments, context=Context(), executor=executor)
+    # The vehicle is one of the system's extra nodes, where a user's vehicle bridge or the display composes in
+    # (served after the planner, before the status and the recorder), not a node added after them.
+    system = build_system(
+        log_dir=log_dir,
+        ros_args=arguments,
+        context=Context(),
+        executor=executor,
+        extra_nodes=[lambda **options: Node("bench_vehicle", **options)],
+    )
     try:
-        return _run(Vehicle(system.context, system.executor), states)
+        return _run(Vehicle(system.extra[0], system.executor), states)
     finally:
         system.shutdown()
 
@@ -232,7 +246,7 @@ def run_cross_process(
         line = child.stdout.readline()  # "logging to ...": the child's nodes exist
         if "logging to" not in line:
             raise RuntimeError(f"helireach bringup did not start: {line!r}")
-        return _run(Vehicle(context, spinner), states)
+        return _run(Vehicle(Node("bench_vehicle", context=context), spinner), states)
     finally:
         child.terminate()
         child.wait(timeout=30)
