@@ -172,3 +172,21 @@ def test_flyability_limits_come_from_the_airframe_file_with_sources(tmp_path) ->
     with pytest.raises(ConfigError, match="max_pitch_rate"):
         parse_airframe(unknown_unit)
     assert dataclasses.replace(load_airframe("oh58a_class")).flyability == airframe.flyability
+
+
+def test_a_replan_from_a_rotor_a_flare_sped_up_past_the_nlps_line_has_a_plan(planner, airframe) -> None:
+    """The NLP keeps Ω 1 % inside its limits; in a flare the rotor can be measured between that line and the true
+    limit (114.6 % of 115 %) while the controls being flown still speed it up. The back-off starts after the first
+    interval, so a re-plan from there converges (it did not: Infeasible/Maximum_Iterations before), and the
+    replay holds it to the true limit everywhere."""
+    omega0 = airframe.nominal_rotor_speed
+    state = np.array([15 * FT, 30 * KT, 1.146 * omega0, 60 * FT, 0.0, 0.0])  # descending at 15 ft/s, 60 ft
+    flare = np.array([0.002, -0.35])  # low collective, 20° nose up: what is flown in the flare
+    plan = planner.plan(state, None, flare, 0.0)
+    assert plan.solver.success, plan.solver.status
+    assert plan.safe and plan.replay.rotor_speed_within_limits
+    assert np.max(plan.replay.states[2]) <= airframe.limits.max_rotor_speed_ratio * omega0
+    # after the first interval the NLP's line holds again
+    after_first = plan.times > plan.time_to_land * planner.transcription.fractions[0] + 1e-9
+    backoff_line = (airframe.limits.max_rotor_speed_ratio - planner.settings.rotor_speed_backoff) * omega0
+    assert after_first.sum() > 50 and np.all(plan.states[2, after_first] <= backoff_line * (1 + 1e-6))

@@ -31,7 +31,10 @@ and changes what a plan may be:
   ``touchdown_min_rotor_speed_ratio`` × Ω₀; above it the in-flight limit holds (a smooth step in h that
   reaches the in-flight limit at h_c). Both carry the rotor back-off, which grows from 0 at the plan's
   start to all of it after 1 s: a re-plan from a rotor near its limit (the collective cannot drop at
-  once) may still keep it above the limit; a rotor below the limit has no plan.
+  once) may still keep it above the limit; a rotor below the limit has no plan. The upper limit's back-off
+  (the bound Ω ≤ (max ratio − back-off) Ω₀) starts after the first interval: within it Ω may be up to the
+  true limit, so a re-plan from a rotor that a flare has sped up past the NLP's line still has a plan (the
+  replay checks the true limit everywhere).
 
 The limits are the airframe's :class:`~helireach_ros.core.airframe.FlyabilityLimits`.
 """
@@ -130,6 +133,10 @@ class FlyableTranscription(VerifiedTranscription):
         self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit (and back-off) is the constraint
         state_low, state_high = self.scaled_state_bounds(self.n_states)
         state_low[-3] = state_high[-3] = 0.0  # h(T) = 0: the plan ends on the ground
+        # The upper rotor back-off starts after the first interval, as the lower one ramps in: a re-plan from a
+        # rotor between the NLP's line and the true limit (a flare speeds it up) must bring it inside, and may.
+        first_interval = slice(2, 6 * settings.degree, 6)  # Ω at interval 1's collocation points
+        state_high[first_interval] = airframe.limits.max_rotor_speed_ratio * omega0 / self.state_scale[2]
         control_low, control_high = self.scaled_control_bounds(intervals)
         # θ(T) inside the window by a margin: the replay's contact can come a little before T, where θ is on
         # its way from the flare attitude (at 20 deg/s, 0.5 deg is 25 ms of margin).
