@@ -153,3 +153,19 @@ def test_the_envelope_query_says_when_its_answer_rests_on_interpolation(envelope
             break
     assert found
     assert math.isnan(envelope.query(-100.0, 0.0).value)
+
+
+def test_a_robust_verdict_says_so_and_a_node_safe_only_nominally_is_caution() -> None:
+    robust = decide(envelope=EnvelopeEvidence("safe", 60.0, False, INSIDE, "robust"), live=None)
+    assert robust.level == "OK" and robust.message.startswith("SAFE (robust): margin 60")
+    assert robust.values["envelope_verdict"] == "robust" and "envelope_verdict_note" not in robust.values
+    nominal_only = decide(envelope=EnvelopeEvidence("not_robust", -10.0, False, INSIDE, "robust"), live=SAFE_LIVE)
+    assert nominal_only.level == "WARN"  # the live verdict is nominal too: it cannot lift the caution
+    assert "not robust" in nominal_only.message
+    fallback = decide(
+        envelope=EnvelopeEvidence("safe", 60.0, False, INSIDE, "nominal", "the envelope has no robust verdict"),
+        live=None,
+    )
+    assert fallback.level == "OK" and fallback.message.startswith("SAFE: margin")
+    assert fallback.values["envelope_verdict"] == "nominal"
+    assert fallback.values["envelope_verdict_note"] == "the envelope has no robust verdict"

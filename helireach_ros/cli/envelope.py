@@ -7,7 +7,10 @@ Examples::
         --out sweep/            # one file per combination in the folder
     helireach envelope compute --climb-rates-fpm=-2000,-1000,0,1500 --dask-local 2 --out hv3d.npz   # 3-D
     helireach envelope compute --method paper --reaction-delay-s 0 --out paper.npz
+    helireach envelope compute --heights-ft 100:800:8 --speeds-kt 0:120:7 --robust --dask-local 2 --out robust.npz
+    helireach envelope robust hv.npz --out hv_robust.npz --workers 2   # robust verdicts for an existing file
     helireach envelope query hv.npz --height-ft 200 --speed-kt 20 --json
+    helireach envelope query hv_robust.npz --height-ft 500 --speed-kt 75 --verdict robust
     helireach envelope plot hv.npz --out hv.png
     helireach envelope plot hv3d.npz --climb-rate-fpm -1000 --out slice.png    # or --all-slices
     helireach envelope plot paper.npz hv.npz --out overlay.png                # boundaries of several files
@@ -29,8 +32,32 @@ from helireach_ros.core.settings import METHODS
 __all__ = ["register"]
 
 
+def _add_executor_arguments(parser: argparse.ArgumentParser) -> None:
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None, help="local worker processes (default: every core)")
+    where.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
+    where.add_argument(
+        "--dask-local", type=int, default=None, metavar="N", help="run on a Dask LocalCluster of N worker processes"
+    )
+
+
+def _add_robust_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--uncertainty",
+        default=None,
+        help="uncertainty set YAML for the robust verdicts (default: config/uncertainty.yaml)",
+    )
+    parser.add_argument(
+        "--full-factorial", action="store_true", help="fly every corner of the set, not its resolution-IV design"
+    )
+    parser.add_argument(
+        "--fly-all-models", action="store_true",
+        help="fly every model of a node even after one fails (slower; the verdict is the same, the counts complete)",
+    )  # fmt: skip
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
-    """Adds ``envelope`` with its ``compute``, ``query`` and ``plot`` subcommands."""
+    """Adds ``envelope`` with its ``compute``, ``robust``, ``query`` and ``plot`` subcommands."""
     parser = subparsers.add_parser(
         "envelope",
         help="H-V envelopes: compute, query, plot",
@@ -67,16 +94,34 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     compute.add_argument("--weights-lb", default=None, help="comma-separated gross weights, lbf (sweep)")
     compute.add_argument("--density-altitude-ft", default=None, help="comma-separated density altitudes, ft (sweep)")
-    where = compute.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None, help="local worker processes (default: every core)")
-    where.add_argument("--scheduler", default=None, help="Dask scheduler address, e.g. tcp://10.0.0.5:8786")
-    where.add_argument(
-        "--dask-local", type=int, default=None, metavar="N", help="run on a Dask LocalCluster of N worker processes"
-    )
+    _add_executor_arguments(compute)
     compute.add_argument("--out", required=True, help="output .npz (a folder for a sweep of several combinations)")
     compute.add_argument("--resume", action="store_true", help="continue the partial file(s) at --out")
     compute.add_argument("--quiet", action="store_true", help="no progress output")
+    compute.add_argument(
+        "--robust", action="store_true",
+        help="also store a robust verdict per node: each safe level-trim node's landing flown closed loop through "
+        "the uncertainty set's corners (see 'helireach envelope robust')",
+    )  # fmt: skip
+    _add_robust_arguments(compute)
     compute.set_defaults(handler=_compute)
+
+    robust = commands.add_parser(
+        "robust",
+        help="add robust verdicts to an envelope: does each safe node still land when the model is wrong?",
+        description="For every safe node of the file's level-trim slice, fly its landing through the models of "
+        "the uncertainty set's design, closed loop with the planner node's re-planning policy and each model's "
+        "latency (and open loop, reported): 'robust' when every closed loop lands within the true limits. "
+        "Writes a copy of the file with the verdicts; the nominal envelope is unchanged.",
+    )
+    robust.add_argument("file", help="a complete envelope .npz")
+    robust.add_argument("--out", required=True, help="output .npz (may be the input file)")
+    robust.add_argument("--airframe", default="uh60a_class", help="the file's airframe (checked; default: %(default)s)")
+    robust.add_argument("--settings", default=None, help="the file's planner settings YAML (checked)")
+    _add_executor_arguments(robust)
+    _add_robust_arguments(robust)
+    robust.add_argument("--quiet", action="store_true", help="no progress output")
+    robust.set_defaults(handler=_robust)
 
     query = commands.add_parser(
         "query",
@@ -90,6 +135,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     query.add_argument("--speed-kt", type=float, required=True)
     query.add_argument("--climb-rate-fpm", type=float, default=0.0, help="ft/min, positive up (default: 0, level)")
     query.add_argument("--airframe", default=None, help="refuse the file unless it is for this airframe")
+    query.add_argument(
+        "--verdict", choices=("nominal", "robust"), default="nominal",
+        help="robust: the robust verdict where the file has one (a safe node that is not robust: not_robust)",
+    )  # fmt: skip
     query.add_argument("--json", action="store_true", help="print JSON (status, value, margin, ...)")
     query.set_defaults(handler=_query)
 
@@ -120,9 +169,10 @@ def _error(message: str) -> int:
 def _compute(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.airframe import ConfigError, load_airframe
     from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelope
-    from helireach_ros.core.envelope.data import STATUS_CODES, EnvelopeError
+    from helireach_ros.core.envelope.data import STATUS_CODES, EnvelopeError, save_envelope
     from helireach_ros.core.envelope.grid import condition_file_name, parse_list, parse_range
     from helireach_ros.core.envelope.progress import Progress
+    from helireach_ros.core.envelope.robust import add_robust_verdicts
     from helireach_ros.core.envelope.workers import make_executor
     from helireach_ros.core.settings import load_settings
     from helireach_ros.core.units import FT, KT, LBF
@@ -157,6 +207,7 @@ def _compute(arguments: argparse.Namespace) -> int:
             EnvelopeJob(a, settings, arguments.power_fraction, heights, speeds, climb_rates=climb_rates)
             for a in airframes
         ]
+        robust_job = _robust_job_factory(arguments) if arguments.robust else None
     except (ConfigError, ValueError) as error:
         return _error(str(error))
     out = Path(arguments.out)
@@ -190,6 +241,12 @@ def _compute(arguments: argparse.Namespace) -> int:
                 job, executor, path, resume=arguments.resume and path.exists(), progress=progress,
                 command=command, grid_spec=grid_spec,
             )  # fmt: skip
+            if robust_job is not None:
+                envelope = add_robust_verdicts(
+                    envelope, robust_job(job.airframe, job.settings), executor, progress, command
+                )
+                save_envelope(envelope, path)
+                _print_robust(path, envelope)
             counts = {name: int((envelope.status == name).sum()) for name in STATUS_CODES}
             compute = envelope.metadata.get("compute", {})
             print(
@@ -205,6 +262,77 @@ def _compute(arguments: argparse.Namespace) -> int:
         return _error(f"computation failed ({type(error).__name__}: {error}); a partial file (if any) can be resumed")
     finally:
         executor.close()
+    return 0
+
+
+def _robust_job_factory(arguments: argparse.Namespace):
+    """A function (airframe, settings) -> RobustEnvelopeJob for the robust arguments.
+
+    Raises:
+        ConfigError, ValueError: an unreadable uncertainty set.
+    """
+    from helireach_ros.core.envelope.robust import RobustEnvelopeJob
+    from helireach_ros.core.uncertainty import DEFAULT_UNCERTAINTY_FILE, load_uncertainty_set
+
+    uncertainty = load_uncertainty_set(arguments.uncertainty or DEFAULT_UNCERTAINTY_FILE)
+
+    def job(airframe, settings) -> RobustEnvelopeJob:
+        return RobustEnvelopeJob(
+            airframe, settings, uncertainty, stop_at_first_failure=not arguments.fly_all_models,
+            full_factorial=arguments.full_factorial,
+        )  # fmt: skip
+
+    return job
+
+
+def _print_robust(path: Path, envelope) -> None:
+    robust = envelope.metadata["robust"]
+    cost = robust["cost"]
+    print(
+        f"{path}: robust verdicts ({robust['design']}): {robust['counts']}; {cost['nodes_flown']} nodes flown in "
+        f"{cost['wall_time_s']:.0f} s on {cost['executor']} ({cost['seconds_per_node_mean'] or 0:.1f} s per node, "
+        f"{cost['plans_solved']} plans solved)"
+    )
+
+
+def _robust(arguments: argparse.Namespace) -> int:
+    """``envelope robust``: robust verdicts for an existing envelope."""
+    from helireach_ros.core.airframe import ConfigError, load_airframe
+    from helireach_ros.core.envelope.data import EnvelopeError, load_envelope, save_envelope
+    from helireach_ros.core.envelope.progress import Progress
+    from helireach_ros.core.envelope.robust import add_robust_verdicts
+    from helireach_ros.core.envelope.workers import make_executor
+    from helireach_ros.core.settings import load_settings
+
+    try:
+        airframe = load_airframe(arguments.airframe)
+        settings = load_settings(arguments.settings)
+        envelope = load_envelope(arguments.file, airframe=airframe)
+        job = _robust_job_factory(arguments)(airframe, settings)
+        envelope.check_matches(settings=settings, where=f"envelope file {arguments.file!r}")
+    except (ConfigError, ValueError) as error:  # EnvelopeError is a ValueError
+        return _error(str(error))
+    try:
+        executor = make_executor(arguments.workers, arguments.scheduler, arguments.dask_local)
+    except (ValueError, OSError) as error:
+        return _error(f"cannot start the workers: {error}")
+    progress = None if arguments.quiet else Progress(sys.stderr)
+    command = "helireach " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["envelope"] else None
+    try:
+        envelope = add_robust_verdicts(envelope, job, executor, progress, command)
+    except EnvelopeError as error:
+        return _error(str(error))
+    except KeyboardInterrupt:
+        executor.abort()
+        print("interrupted: no file written", file=sys.stderr)
+        return 130
+    except Exception as error:  # a worker or cluster failure
+        executor.abort()
+        return _error(f"robust verification failed ({type(error).__name__}: {error})")
+    finally:
+        executor.close()
+    path = save_envelope(envelope, arguments.out)
+    _print_robust(path, envelope)
     return 0
 
 
@@ -253,7 +381,9 @@ def _query(arguments: argparse.Namespace) -> int:
         envelope = load_envelope(arguments.file, airframe=airframe)
     except EnvelopeError as error:
         return _error(str(error))
-    answer = envelope.query(arguments.height_ft * FT, arguments.speed_kt * KT, arguments.climb_rate_fpm * FT / 60.0)
+    answer = envelope.query(
+        arguments.height_ft * FT, arguments.speed_kt * KT, arguments.climb_rate_fpm * FT / 60.0, arguments.verdict
+    )
     if arguments.json:
         document = answer.to_dict() | {
             "height_ft": arguments.height_ft,
@@ -268,10 +398,10 @@ def _query(arguments: argparse.Namespace) -> int:
     else:
         print(
             f"{arguments.height_ft:g} ft, {arguments.speed_kt:g} kt, {arguments.climb_rate_fpm:+g} ft/min: "
-            f"{answer.status} (value {answer.value:.3f}, "
+            f"{answer.status} ({answer.verdict} verdict, value {answer.value:.3f}, "
             f"margin {answer.margin:.1f} ft/kt) [{envelope.airframe_name}, envelope {envelope.envelope_id}]"
         )
-    return 0 if answer.status == "safe" else 1  # unsafe, unverified, failed and outside are all "not safe"
+    return 0 if answer.status == "safe" else 1  # unsafe, not_robust, unverified, failed, outside: all "not safe"
 
 
 def _plot(arguments: argparse.Namespace) -> int:

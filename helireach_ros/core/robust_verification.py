@@ -23,6 +23,10 @@ resolution-IV corners of :meth:`~helireach_ros.core.uncertainty.UncertaintySet.v
 not for every point of the set; the verdict names its design.
 
 Sensor noise and its seed are the scenario's (zero noise gives a deterministic verdict).
+
+With ``stop_at_first_failure`` the flights stop at the first model whose closed loop fails: the verdict
+cannot change after it, and an envelope (:mod:`helireach_ros.core.envelope.robust`) does not pay for the rest.
+Such a verdict lists the models flown, not the design; ``design_size`` says how many it holds.
 """
 
 from __future__ import annotations
@@ -88,6 +92,7 @@ class RobustVerdict:
         closed_loop: one outcome per model, in order.
         open_loop: one outcome per model, in order (not part of the verdict).
         plan: the plan verified.
+        design_size: models in the design (more than flown when the flights stopped at the first failure).
     """
 
     robust: bool
@@ -96,6 +101,16 @@ class RobustVerdict:
     closed_loop: tuple[ModelOutcome, ...]
     open_loop: tuple[ModelOutcome, ...]
     plan: LandingPlan
+    design_size: int = -1
+
+    def __post_init__(self) -> None:
+        if self.design_size < 0:
+            object.__setattr__(self, "design_size", len(self.closed_loop))
+
+    @property
+    def stopped_early(self) -> bool:
+        """The flights stopped at the first failing model (fewer flown than the design holds)."""
+        return len(self.closed_loop) < self.design_size
 
     @property
     def failing_models(self) -> tuple[str, ...]:
@@ -112,8 +127,13 @@ class RobustVerdict:
         if not self.closed_loop:
             return "no perturbed model was flown"
         first = next(outcome for outcome in self.closed_loop if not outcome.within_limits)
+        flown = (
+            f"{len(self.closed_loop)}"
+            if not self.stopped_early
+            else (f"{len(self.closed_loop)} flown (stopped at the first failure) of {self.design_size}")
+        )
         return (
-            f"{len(self.failing_models)} of {len(self.closed_loop)} models fail closed loop; "
+            f"{len(self.failing_models)} of {flown} models fail closed loop; "
             f"first {first.model.label}: {first.touchdown.reason}"
         )
 
@@ -161,6 +181,7 @@ def verify_robust(
     policy: ClosedLoopSettings | None = None,
     plan: LandingPlan | None = None,
     design: str = "",
+    stop_at_first_failure: bool = False,
 ) -> RobustVerdict:
     """Flies the scenario's landing through every model, open and closed loop, and gives the verdict.
 
@@ -172,6 +193,7 @@ def verify_robust(
         plan: the plan to fly open loop (default: planned now from :func:`failure_state`); it must start
             from the scenario's failure state.
         design: a description of ``models`` for the verdict.
+        stop_at_first_failure: fly no further model once one fails closed loop (the verdict is then settled).
 
     Raises:
         ValueError: the plan starts from another state, or the scenario has its own mismatch.
@@ -189,6 +211,8 @@ def verify_robust(
         vehicle = model_vehicle(scenario, model, planner.airframe, planner.settings)
         result = fly_closed_loop(vehicle, planner, dataclasses.replace(policy, latency=model.latency))
         closed_loop.append(ModelOutcome(model, result.touchdown, result.plans, result.failed_plans))
+        if stop_at_first_failure and not closed_loop[-1].within_limits:
+            break
     robust = plan.safe and bool(closed_loop) and all(outcome.within_limits for outcome in closed_loop)
     return RobustVerdict(
         robust=robust,
@@ -197,4 +221,5 @@ def verify_robust(
         closed_loop=tuple(closed_loop),
         open_loop=tuple(open_loop),
         plan=plan,
+        design_size=len(models),
     )

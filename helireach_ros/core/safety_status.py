@@ -24,7 +24,12 @@ rotor speed not measured                          at most WARN (the envelope ass
 ================================================  ===========================================================
 
 Envelope answers: OK safe and at least ``warn_margin`` (ft/kt) from the boundary, WARN safe but closer,
-ERROR not proven safe (unsafe, unverified, failed or outside the grid). Live answers: OK safe, WARN safe
+ERROR not proven safe (unsafe, unverified, failed or outside the grid). An envelope with robust verdicts
+(:mod:`helireach_ros.core.envelope.robust`) answers by them where it has them (the status node's
+``envelope_verdict``): OK then means safe *and* robust (the closed loop lands in every perturbed model flown),
+the margin is to the not-robustly-safe set, and a node safe in the nominal model only is WARN (CAUTION: not
+robust); the values say which verdict was used (``envelope_verdict``) and, when the robust one was asked for
+but not available, why. Live answers: OK safe, WARN safe
 with J above ``live_warn_value`` (a touchdown near a limit), ERROR anything else (unsafe, unverified,
 failed, solver error).
 
@@ -77,12 +82,17 @@ class EnvelopeEvidence:
         margin: ft/kt from the not-proven-safe set (signed).
         by_interpolation: the enclosing grid nodes disagree (some safe, some not).
         domain: whether the measured state lies in the envelope's validity domain.
+        verdict: ``"robust"`` or ``"nominal"``: what the answer rests on
+            (:attr:`~helireach_ros.core.envelope.data.EnvelopeQuery.verdict`).
+        verdict_note: why the answer is nominal when the robust verdict was asked for ('' otherwise).
     """
 
     status: str
     margin: float
     by_interpolation: bool
     domain: DomainCheck
+    verdict: str = "nominal"
+    verdict_note: str = ""
 
 
 @dataclass(frozen=True)
@@ -140,10 +150,13 @@ def _where(height: float, speed: float) -> str:
 
 
 def _envelope_level(evidence: EnvelopeEvidence, warn_margin: float) -> tuple[str, str]:
+    robust = " (robust)" if evidence.verdict == "robust" else ""
     if evidence.status == "safe":
         if evidence.margin >= warn_margin:
-            return "OK", f"SAFE: margin {evidence.margin:.0f}"
-        return "WARN", f"CAUTION: {evidence.margin:.0f} from the boundary"
+            return "OK", f"SAFE{robust}: margin {evidence.margin:.0f}"
+        return "WARN", f"CAUTION{robust}: {evidence.margin:.0f} from the boundary"
+    if evidence.status == "not_robust":
+        return "WARN", "CAUTION: safe in the nominal model only, not robust to the model's uncertainty"
     if evidence.status == "outside":
         return "ERROR", "AVOID: outside the envelope grid, unknown"
     if evidence.status == "unsafe":
@@ -244,7 +257,10 @@ def _before_failure(
             margin_ft_kt=envelope.margin,
             in_domain=envelope.domain.inside,
             domain=" ; ".join(envelope.domain.reasons),
+            envelope_verdict=envelope.verdict,
         )
+        if envelope.verdict_note:
+            values["envelope_verdict_note"] = envelope.verdict_note
     if envelope is None or not envelope.domain.inside:
         why = (
             f"no envelope ({envelope_note})"

@@ -40,6 +40,14 @@ negative otherwise, so margin > 0 exactly when the status is ``safe``. Between t
 is the union of both slices' (a node of the plane is safe only if it is safe in both), so the margin is
 the 2-D margin of the combined slice. The margin does not measure along the climb axis. The refined
 boundary points are reported and plotted, but never used to call a state safe.
+
+**Robust verdicts** (optional arrays, :mod:`helireach_ros.core.envelope.robust`): ``robust_code`` per node
+(:data:`ROBUST_CODES`) says whether a nominally safe node's landing also holds, closed loop, in every model of a
+design of the uncertainty set. ``query(..., verdict="robust")`` answers by the same node rule with a safe node
+that is not robust counted as ``not_robust`` (between ``safe`` and ``unverified`` in conservatism), and its
+margin is to the set not proven *robustly* safe; where an enclosing node has no robust verdict
+(``not_computed``, or a file without the arrays) it answers with the nominal verdict and says so
+(:attr:`EnvelopeQuery.verdict`). A file with these arrays is read by older software unchanged (extra arrays).
 """
 
 from __future__ import annotations
@@ -76,7 +84,10 @@ __all__ = [
     "FORMAT_VERSION_3D",
     "PENDING",
     "QUERY_STATUSES",
+    "ROBUST_ARRAYS",
+    "ROBUST_CODES",
     "STATUS_CODES",
+    "VERDICTS",
     "Envelope",
     "EnvelopeError",
     "EnvelopeQuery",
@@ -103,10 +114,19 @@ STATUS_CODES = {"safe": 0, "unsafe": 1, "unverified": 2, "failed": 3, "no_trim":
 PENDING = -1
 """Status code of a cell a partial (interrupted) computation has not finished."""
 _STATUS_NAMES = {code: name for name, code in STATUS_CODES.items()}
-QUERY_STATUSES = (*STATUS_CODES, "outside")
+QUERY_STATUSES = (*STATUS_CODES, "not_robust", "outside")
+ROBUST_CODES = {"robust": 0, "not_robust": 1, "nominal_not_safe": 2, "not_computed": 3}
+"""Per-node robust verdict (int8): ``not_robust`` a model's closed loop failed; ``nominal_not_safe`` not flown
+(robust needs nominal safety); ``not_computed`` not flown (e.g. a climb slice other than level flight)."""
+ROBUST_ARRAYS = (
+    "robust_code", "robust_models_flown", "robust_closed_loop_landed", "robust_open_loop_landed", "robust_seconds",
+)  # fmt: skip
+"""The per-node arrays of a robust verdict (all or none)."""
+VERDICTS = ("nominal", "robust")
+"""What a query answers by: the nominal model's verdict, or the robust one where the envelope has it."""
 
 # Between enclosing nodes of different status, the query reports the most conservative one.
-_CONSERVATISM = {"safe": 0, "unverified": 1, "failed": 2, "no_trim": 3, "unsafe": 4}
+_CONSERVATISM = {"safe": 0, "not_robust": 1, "unverified": 2, "failed": 3, "no_trim": 4, "unsafe": 5}
 
 # Arrays every envelope file holds: name -> (dtype kind, number of leading grid dimensions).
 _REQUIRED_ARRAYS = {
@@ -153,16 +173,22 @@ class EnvelopeQuery:
             < 0 otherwise; ±inf if there is no such boundary; NaN outside the grid.
         by_interpolation: the enclosing grid nodes disagree (some safe, some not): the point itself is
             neither proven safe nor proven unsafe by the grid.
+        verdict: ``"robust"`` when the answer is the robust verdict (every enclosing node has one),
+            ``"nominal"`` otherwise (asked for, or the envelope has no robust verdict here).
     """
 
     status: str
     value: float
     margin: float
     by_interpolation: bool = False
+    verdict: str = "nominal"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (non-finite numbers become None)."""
-        return {"status": self.status, "value": _json_number(self.value), "margin": _json_number(self.margin)}
+        return {
+            "status": self.status, "value": _json_number(self.value), "margin": _json_number(self.margin),
+            "verdict": self.verdict,
+        }  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -287,16 +313,24 @@ class Envelope:
         )
         if primal.shape[3] == 0:
             self._usable_plans[:] = False
-        safe = codes == 0
+        self._margin_geometry = self._margins(codes == 0)
+        if self.has_robust_verdict:
+            robust = self._arrays["robust_code"] if self.is_3d else self._arrays["robust_code"][None]
+            self._robust_known = robust != ROBUST_CODES["not_computed"]
+            self._robust_margin_geometry = self._margins((codes == 0) & (robust == ROBUST_CODES["robust"]))
+            self._stacked["robust_code"] = robust
+
+    def _margins(self, safe: np.ndarray) -> dict[tuple[int, ...], _MarginGeometry]:
+        """Margin geometry per enclosing set of slices; between two slices the combined one (safe where both are)."""
         heights_ft, speeds_kt = self.heights / FT, self.speeds / KT
-        # margins between two slices use the combined slice (safe only where both are): one per enclosing set
-        self._margin_geometry = {(k,): _MarginGeometry(heights_ft, speeds_kt, safe[k]) for k in range(safe.shape[0])}
-        self._margin_geometry.update(
+        geometry = {(k,): _MarginGeometry(heights_ft, speeds_kt, safe[k]) for k in range(safe.shape[0])}
+        geometry.update(
             {
                 (k, k + 1): _MarginGeometry(heights_ft, speeds_kt, safe[k] & safe[k + 1])
                 for k in range(safe.shape[0] - 1)
             }
         )
+        return geometry
 
     def _validate(self) -> None:
         arrays = self._arrays
@@ -329,6 +363,19 @@ class Envelope:
                 raise EnvelopeError(f"array 'boundary_slice' must be {boundary_count} integers")
             if boundary_count and not (0 <= slices.min() and slices.max() < grid[0]):
                 raise EnvelopeError("array 'boundary_slice' names a climb slice that does not exist")
+        present = [name for name in ROBUST_ARRAYS if name in arrays]
+        if present:
+            if len(present) != len(ROBUST_ARRAYS):
+                missing = ", ".join(name for name in ROBUST_ARRAYS if name not in arrays)
+                raise EnvelopeError(f"envelope has a robust verdict without array(s): {missing}")
+            for name in ROBUST_ARRAYS:
+                if arrays[name].shape != codes.shape:
+                    raise EnvelopeError(f"array {name!r} has shape {arrays[name].shape}, expected {codes.shape}")
+            if not np.all(np.isin(arrays["robust_code"], list(ROBUST_CODES.values()))):
+                raise EnvelopeError("robust_code holds unknown codes")
+            robust = arrays["robust_code"] == ROBUST_CODES["robust"]
+            if np.any(robust & (codes != STATUS_CODES["safe"])):
+                raise EnvelopeError("robust_code calls a node robust that is not safe")
         if self._metadata.get("format") != FORMAT_NAME:
             raise EnvelopeError(f"metadata format is {self._metadata.get('format')!r}, expected {FORMAT_NAME!r}")
 
@@ -343,6 +390,19 @@ class Envelope:
     def is_3d(self) -> bool:
         """The envelope has a climb-rate axis (format version 2)."""
         return "climb_rates" in self._arrays
+
+    @property
+    def has_robust_verdict(self) -> bool:
+        """The envelope holds robust verdicts (:data:`ROBUST_ARRAYS`; they may cover only some nodes)."""
+        return "robust_code" in self._arrays
+
+    @property
+    def robust_status(self) -> np.ndarray | None:
+        """Per-node robust verdict names (:data:`ROBUST_CODES`), shaped like ``status``; None without them."""
+        if not self.has_robust_verdict:
+            return None
+        names = {code: name for name, code in ROBUST_CODES.items()}
+        return np.vectorize(names.__getitem__, otypes=[object])(self._arrays["robust_code"]).astype("U16")
 
     @property
     def climb_rates(self) -> np.ndarray | None:
@@ -442,7 +502,9 @@ class Envelope:
             return [0]  # one slice: it speaks for its tolerance band
         return _enclosing_nodes(self.climb_rates, climb_rate)
 
-    def query(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> EnvelopeQuery:
+    def query(
+        self, height_m: float, speed_ms: float, climb_rate: float = 0.0, verdict: str = "nominal"
+    ) -> EnvelopeQuery:
         """Status, value and margin at a trimmed state (see the module docstring).
 
         Args:
@@ -450,9 +512,17 @@ class Envelope:
             speed_ms: forward speed, m/s.
             climb_rate: m/s, positive up (default level flight). Outside the envelope's climb-rate range
                 (a 2-D envelope: level ± its tolerance) the answer is ``outside``.
+            verdict: ``"nominal"``, or ``"robust"``: the robust verdict where every enclosing node has one
+                (a safe node that is not robust is ``not_robust``), else the nominal one; the answer's
+                ``verdict`` says which it is.
 
         Anything that is not a finite number (NaN, inf, None, text) is ``outside``.
+
+        Raises:
+            ValueError: an unknown ``verdict``.
         """
+        if verdict not in VERDICTS:
+            raise ValueError(f"verdict must be one of {', '.join(VERDICTS)}, got {verdict!r}")
         height_m, speed_ms, climb_rate = _as_float(height_m), _as_float(speed_ms), _as_float(climb_rate)
         rows = _enclosing_nodes(self.heights, height_m)
         columns = _enclosing_nodes(self.speeds, speed_ms)
@@ -462,14 +532,25 @@ class Envelope:
         enclosing = np.ix_(slices, rows, columns)
         codes = self._stacked["status_code"][enclosing].ravel()
         names = [_STATUS_NAMES.get(int(code), "failed") for code in codes]  # a pending node counts as failed
+        geometry = self._margin_geometry
+        robust = verdict == "robust" and self.has_robust_verdict and bool(np.all(self._robust_known[enclosing]))
+        if robust:
+            robust_codes = self._stacked["robust_code"][enclosing].ravel()
+            names = [
+                "not_robust" if name == "safe" and code != ROBUST_CODES["robust"] else name
+                for name, code in zip(names, robust_codes, strict=True)
+            ]
+            geometry = self._robust_margin_geometry
         status = max(names, key=_CONSERVATISM.__getitem__)
         value = float(np.max(self._stacked["value"][enclosing]))
-        margin = self._margin_geometry[tuple(slices)].margin(height_m / FT, speed_ms / KT, status == "safe")
-        return EnvelopeQuery(status, value, margin, "safe" in names and len(set(names)) > 1)
+        margin = geometry[tuple(slices)].margin(height_m / FT, speed_ms / KT, status == "safe")
+        return EnvelopeQuery(
+            status, value, margin, "safe" in names and len(set(names)) > 1, "robust" if robust else "nominal"
+        )
 
-    def status_at(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> str:
-        """Shortcut for ``query(height_m, speed_ms, climb_rate).status``."""
-        return self.query(height_m, speed_ms, climb_rate).status
+    def status_at(self, height_m: float, speed_ms: float, climb_rate: float = 0.0, verdict: str = "nominal") -> str:
+        """Shortcut for ``query(height_m, speed_ms, climb_rate, verdict).status``."""
+        return self.query(height_m, speed_ms, climb_rate, verdict).status
 
     def margin(self, height_m: float, speed_ms: float, climb_rate: float = 0.0) -> float:
         """Shortcut for ``query(height_m, speed_ms, climb_rate).margin`` (ft/kt units)."""

@@ -8,7 +8,9 @@ differ). The region not proven safe is shaded: inside each grid cell the shaded 
 is bounded by the cell's not-safe corners and the refined boundary points on its edges (marching
 squares; an ambiguous saddle cell is shaded through its middle, the conservative choice). The
 refined boundary is drawn as a curve through those points. Unverified and failed nodes get their
-own markers. An optional flown track (height m, speed m/s) is drawn on top.
+own markers. An optional flown track (height m, speed m/s) is drawn on top. An envelope with robust verdicts
+(:mod:`helireach_ros.core.envelope.robust`) also gets its **robust boundary**: the edge of the set not proven
+robustly safe (cells with a corner that is not robust), dashed, and markers on the safe nodes that are not robust.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, PathPatch
 from matplotlib.path import Path
 
-from helireach_ros.core.envelope.data import STATUS_CODES, Envelope
+from helireach_ros.core.envelope.data import ROBUST_CODES, STATUS_CODES, Envelope
 from helireach_ros.core.units import FT, KT, LBF
 
 _FPM = FT / 60.0
@@ -48,6 +50,54 @@ __all__ = [
 ]
 
 _UNSAFE_COLOUR = "#d62728"
+_ROBUST_COLOUR = "#1f4fb4"
+
+
+def _robust_only(envelope: Envelope) -> Envelope | None:
+    """A 2-D envelope whose only safe nodes are the robust ones (None: no robust verdict in this slice).
+
+    For drawing the robust boundary with :func:`region_outline`; its refined points are dropped (they refine
+    the nominal boundary).
+    """
+    if not envelope.has_robust_verdict:
+        return None
+    arrays = envelope.arrays
+    robust_code = arrays["robust_code"]
+    if np.all(robust_code == ROBUST_CODES["not_computed"]):
+        return None
+    codes = np.array(arrays["status_code"], copy=True)
+    codes[(codes == STATUS_CODES["safe"]) & (robust_code != ROBUST_CODES["robust"])] = STATUS_CODES["unverified"]
+    arrays["status_code"] = codes
+    arrays["boundary"] = arrays["boundary_unsafe_side"] = np.zeros((0, 2))
+    arrays["boundary_edge"] = np.zeros((0, 4), np.int32)
+    return Envelope(arrays, envelope.metadata)
+
+
+def _draw_robust(axes, envelope: Envelope, marker_size: float, counts: bool) -> list:
+    """The robust boundary and the safe-but-not-robust nodes; legend handles (none without a robust verdict)."""
+    robust_only = _robust_only(envelope)
+    if robust_only is None:
+        return []
+    axes.add_collection(
+        LineCollection(region_outline(robust_only), colors=_ROBUST_COLOUR, linewidths=2.2, linestyles="--", zorder=3)
+    )
+    speeds_kt, heights_ft = envelope.speeds / KT, envelope.heights / FT
+    grid_speed, grid_height = np.meshgrid(speeds_kt, heights_ft)
+    robust_code = envelope.arrays["robust_code"]
+    not_robust = (envelope.status == "safe") & (robust_code != ROBUST_CODES["robust"])
+    robust = robust_code == ROBUST_CODES["robust"]
+    axes.plot(grid_speed[not_robust], grid_height[not_robust], "o", markerfacecolor="none",
+              markeredgecolor=_ROBUST_COLOUR, markersize=marker_size * 0.8, linestyle="none", zorder=4)  # fmt: skip
+    axes.plot(grid_speed[robust], grid_height[robust], "o", color=_ROBUST_COLOUR, markersize=marker_size * 0.6,
+              linestyle="none", zorder=4)  # fmt: skip
+    design = envelope.metadata.get("robust", {}).get("design", "")
+    return [
+        Line2D([], [], color=_ROBUST_COLOUR, linewidth=2.2, linestyle="--", label=f"robust boundary ({design})"),
+        Line2D([], [], marker="o", color=_ROBUST_COLOUR, linestyle="none",
+               label=f"robust: {int(robust.sum())}" if counts else "robust"),
+        Line2D([], [], marker="o", markerfacecolor="none", markeredgecolor=_ROBUST_COLOUR, linestyle="none",
+               label=f"safe, not robust: {int(not_robust.sum())}" if counts else "safe, not robust"),
+    ]  # fmt: skip
 
 
 def _crossings(envelope: Envelope) -> dict[tuple[int, int, int, int], tuple[float, float]]:
@@ -179,6 +229,7 @@ def _draw_diagram(axes, envelope: Envelope, marker_size: float = 7.0, counts: bo
                 Line2D([], [], marker=marker, color=colour, markeredgecolor="black", linestyle="none",
                        label=f"{label}: {int(mask.sum())}" if counts else label)
             )  # fmt: skip
+    handles += _draw_robust(axes, envelope, marker_size, counts)
     _label_axes(axes, envelope)
     return handles
 

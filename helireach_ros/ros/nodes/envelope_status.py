@@ -11,6 +11,11 @@ when the verdict changes and every ``publish_period``. The evidence:
   rotor speed, within tolerances; the rotor speed from ``/helireach/rotor_state``);
 - the **live verdict** (``/helireach/live_reachability``, from the planner): the landing NLP solved and
   replayed from the measured state, evidence while its state is at most ``live_max_age`` old;
+- where the envelope holds **robust verdicts** (``helireach envelope compute --robust``) they are used by
+  default (parameter ``envelope_verdict``: ``robust`` or ``nominal``): SAFE then means the landing also held,
+  closed loop, in every perturbed model flown, and a state safe only in the nominal model is CAUTION; the
+  status's ``envelope_verdict`` value says which verdict it rests on (and ``envelope_verdict_note`` why not the
+  robust one, when it was asked for);
 - after a failure (``/helireach/failure_episode`` says ``failed``) only the planner's **current plan**
   (``/helireach/plan_status`` of that episode);
 - **input QoS**: whatever the rest says, the status is ERROR (``INPUT QOS:``) while a helireach node reports
@@ -50,12 +55,13 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
+from helireach_ros.core.envelope.data import VERDICTS
 from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.failure_episode import EpisodeState
 from helireach_ros.core.safety_status import EnvelopeEvidence, LiveEvidence, PlanEvidence, decide_safety_status
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.parameters import ParameterError, declare_aircraft, declare_checked_parameter
 from helireach_ros.ros.qos import QOS_STATUS_SUFFIX, QosWatch, input_problems_of
 
 __all__ = ["EnvelopeStatusNode", "SafetyVerdict", "evaluate_safety", "main"]
@@ -92,6 +98,7 @@ def evaluate_safety(
     episode: str = "normal",
     plan: PlanEvidence | None = None,
     live_warn_value: float = -0.1,
+    envelope_verdict: str = "robust",
 ) -> SafetyVerdict:
     """The safety verdict for a state: the evidence gathered here, decided by
     :func:`helireach_ros.core.safety_status.decide_safety_status` (its docstring has the rules).
@@ -110,6 +117,7 @@ def evaluate_safety(
         episode: the failure episode's phase (``/helireach/failure_episode``).
         plan: the current plan of the episode (``/helireach/plan_status``), or None.
         live_warn_value: live WARN above this J.
+        envelope_verdict: ``robust`` (the envelope's robust verdict where it has one) or ``nominal``.
     """
     values: dict[str, Any] = {
         "envelope_id": envelope.envelope_id if envelope is not None else "",
@@ -136,10 +144,17 @@ def evaluate_safety(
     evidence = None
     if envelope is not None and not state_problem:
         # a 3-D envelope answers at the measured climb rate; a 2-D one at level trim, its domain checks the rest
-        query = envelope.query(height, forward_speed, reading.climb_rate if envelope.is_3d else 0.0)
+        climb_rate = reading.climb_rate if envelope.is_3d else 0.0
+        query = envelope.query(height, forward_speed, climb_rate, envelope_verdict)
         validity_domain, omega0 = envelope_domain(envelope)
         domain = validity_domain.check(reading.climb_rate, rotor_speed, omega0, power_fraction=envelope.power_fraction)
-        evidence = EnvelopeEvidence(query.status, query.margin, query.by_interpolation, domain)
+        note = ""
+        if envelope_verdict == "robust" and query.verdict != "robust":
+            note = (
+                "the envelope has no robust verdict" if not envelope.has_robust_verdict
+                else "no robust verdict at this state's grid nodes"
+            )  # fmt: skip
+        evidence = EnvelopeEvidence(query.status, query.margin, query.by_interpolation, domain, query.verdict, note)
         values["envelope_value"] = query.value
     decision = decide_safety_status(
         height=height,
@@ -195,9 +210,9 @@ class EnvelopeStatusNode(Node):
 
     Parameters: ``airframe``, ``gross_weight``, ``density_altitude`` (the aircraft today, shared with the
     planner: :func:`~helireach_ros.ros.messages.declare_aircraft`; an envelope made for another aircraft is
-    refused), ``envelope_file`` ('' = shipped; settable at run time), ``warn_margin`` (ft/kt units;
-    settable), ``stale_timeout`` (s), ``publish_period`` (s), ``diagnostics_period`` (s), ``qos_report_timeout``
-    (s a node's QoS report on ``/diagnostics`` counts for).
+    refused), ``envelope_file`` ('' = shipped; settable at run time), ``envelope_verdict`` (``robust`` or
+    ``nominal``; settable), ``warn_margin`` (ft/kt units; settable), ``stale_timeout`` (s), ``publish_period``
+    (s), ``diagnostics_period`` (s), ``qos_report_timeout`` (s a node's QoS report on ``/diagnostics`` counts for).
     """
 
     def __init__(self, **node_options: Any) -> None:
@@ -220,6 +235,16 @@ class EnvelopeStatusNode(Node):
         self._live_warn_value = declare(
             "live_warn_value", -0.1, "a safe live verdict with J above this is CAUTION", (-1.0, 0.0)
         )
+        self._envelope_verdict = declare(
+            "envelope_verdict", "robust",
+            "robust: the envelope's robust verdict where it has one (else nominal, and the status says so); nominal",
+            read_only=False,
+        )  # fmt: skip
+        if self._envelope_verdict not in VERDICTS:
+            raise ParameterError(
+                f"parameter 'envelope_verdict' of {self.get_name()} must be one of {', '.join(VERDICTS)}, "
+                f"got {self._envelope_verdict!r}"
+            )
 
         self._lock = threading.Lock()
         self._envelope: Any | None = None
@@ -295,6 +320,10 @@ class EnvelopeStatusNode(Node):
         for parameter in parameters:
             if parameter.name == "envelope_file" and parameter.type_ != Parameter.Type.STRING:
                 return SetParametersResult(successful=False, reason="envelope_file must be a string")
+            if parameter.name == "envelope_verdict" and parameter.value not in VERDICTS:
+                return SetParametersResult(
+                    successful=False, reason=f"envelope_verdict must be one of {', '.join(VERDICTS)}"
+                )
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
@@ -303,6 +332,8 @@ class EnvelopeStatusNode(Node):
                 self._load_envelope(parameter.value)
             elif parameter.name == "warn_margin":
                 self._warn_margin = float(parameter.value)
+            elif parameter.name == "envelope_verdict":
+                self._envelope_verdict = str(parameter.value)
         self._publish(force=True)
 
     def _on_state(self, message: Odometry) -> None:
@@ -401,6 +432,7 @@ class EnvelopeStatusNode(Node):
                 episode=episode,
                 plan=plan,
                 live_warn_value=self._live_warn_value,
+                envelope_verdict=self._envelope_verdict,
             )
             key = (verdict.level, verdict.message.split(":", 1)[0], str(verdict.values.get("evidence", "")))
             if not force and key == self._last_published:
