@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 
+from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import get_planner
-from helireach_ros.core.robust_verification import failure_state, model_vehicle, verify_robust
-from helireach_ros.core.simulation import Scenario
+from helireach_ros.core.robust_verification import failure_state, model_vehicle, verify_plan_robust, verify_robust
+from helireach_ros.core.simulation import Scenario, SimulatedVehicle
 from helireach_ros.core.uncertainty import PerturbedModel, UncertainRange, load_uncertainty_set
 from helireach_ros.core.units import FT, KT
 
@@ -93,3 +95,26 @@ def test_a_plan_from_another_state_or_a_scenario_with_its_own_mismatch_is_refuse
     mismatched = dataclasses.replace(scenario, parameter_mismatch={"gross_weight": 0.05})
     with pytest.raises(ValueError, match="own parameter mismatch"):
         model_vehicle(mismatched, PerturbedModel({}), planner.airframe, planner.settings)
+
+
+def test_a_plan_from_a_measured_state_is_flown_from_that_state(scenario, planner) -> None:
+    """verify_plan_robust starts each vehicle in the plan's own state: for a level-trim failure it flies exactly
+    what verify_robust flies; from a descent (no level-trim scenario exists) it still gives a verdict."""
+    exact = [PerturbedModel({}, latency=0.05)]
+    plan = planner.plan(failure_state(scenario, planner.airframe))
+    from_scenario = verify_robust(scenario, planner, exact, plan=plan)
+    from_state = verify_plan_robust(plan, planner, exact)
+    assert from_state.robust and from_scenario.robust
+    for ours, theirs in ((from_state.open_loop[0], from_scenario.open_loop[0]),
+                         (from_state.closed_loop[0], from_scenario.closed_loop[0])):  # fmt: skip
+        assert ours.touchdown.descent_rate == pytest.approx(theirs.touchdown.descent_rate, abs=1e-4)  # clock 3 s apart
+        assert ours.touchdown.time_after_failure == pytest.approx(theirs.touchdown.time_after_failure, abs=1e-4)
+    descending = initial_state_after_failure(planner.airframe, 400 * FT, 60 * KT, climb_rate=-5.0).as_array()
+    descent_plan = planner.plan(descending)
+    heavy = PerturbedModel({"gross_weight": 0.25}, latency=0.05, label="gross_weight+25%")
+    verdict = verify_plan_robust(descent_plan, planner, [*exact, heavy], stop_at_first_failure=True)
+    assert verdict.closed_loop[0].within_limits and not verdict.robust
+    assert verdict.design_size == len(verdict.closed_loop) == 2
+    assert verdict.failing_models == ("gross_weight+25%",)
+    with pytest.raises(ValueError, match="failure_time 0"):
+        SimulatedVehicle(scenario, planner.airframe, planner.settings, descending, np.zeros(2))

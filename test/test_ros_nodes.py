@@ -156,6 +156,7 @@ def test_every_topic_has_its_documented_type_and_qos(no_ros_discovery) -> None:
             rm.TOPIC_LANDING_TRAJECTORY,
             rm.TOPIC_LANDING_PATH,
             rm.TOPIC_PLAN_STATUS,
+            rm.TOPIC_ROBUST_VERDICT,
             rm.TOPIC_TOUCHDOWN,
         }
         # Every helireach node reports on /diagnostics.

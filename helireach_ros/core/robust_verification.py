@@ -43,7 +43,7 @@ from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import LandingPlan, LandingPlanner
 from helireach_ros.core.settings import PlannerSettings
-from helireach_ros.core.simulation import ControlSchedule, Scenario, SimulatedVehicle, TouchdownReport
+from helireach_ros.core.simulation import ControlSchedule, Scenario, SensorNoise, SimulatedVehicle, TouchdownReport
 from helireach_ros.core.uncertainty import PerturbedModel
 
 __all__ = [
@@ -52,6 +52,8 @@ __all__ = [
     "failure_state",
     "fly_open_loop",
     "model_vehicle",
+    "scenario_at",
+    "verify_plan_robust",
     "verify_robust",
 ]
 
@@ -146,12 +148,18 @@ def failure_state(scenario: Scenario, airframe: Airframe) -> np.ndarray:
 
 
 def model_vehicle(
-    scenario: Scenario, model: PerturbedModel, airframe: Airframe, settings: PlannerSettings
+    scenario: Scenario,
+    model: PerturbedModel,
+    airframe: Airframe,
+    settings: PlannerSettings,
+    start: LandingPlan | None = None,
 ) -> SimulatedVehicle:
     """The simulated vehicle that *is* the perturbed model: the scenario flown by ``model.airframe(airframe)``.
 
     The vehicle judges its touchdown against the limits of the airframe it is given, which a perturbation
-    does not change (density altitude and mismatch parameters leave the limits and Ω₀ alone).
+    does not change (density altitude and mismatch parameters leave the limits and Ω₀ alone). With ``start``
+    it starts at the failure in that plan's initial state, holding its initial control (the scenario's
+    failure time must be 0).
 
     Raises:
         ValueError: the scenario has a mismatch of its own (it would be silently replaced).
@@ -159,7 +167,18 @@ def model_vehicle(
     if scenario.parameter_mismatch:
         raise ValueError(f"scenario {scenario.name!r} has its own parameter mismatch: pass it as the model instead")
     perturbed = dataclasses.replace(scenario, parameter_mismatch=model.mismatch)
-    return SimulatedVehicle(perturbed, model.conditions(airframe), settings)
+    if start is None:
+        return SimulatedVehicle(perturbed, model.conditions(airframe), settings)
+    return SimulatedVehicle(perturbed, model.conditions(airframe), settings, start.initial_state, start.initial_control)
+
+
+def scenario_at(plan: LandingPlan, noise: SensorNoise | None = None, seed: int = 0) -> Scenario:
+    """A scenario that starts at the failure in ``plan``'s initial state (for :func:`verify_plan_robust`)."""
+    height, speed = float(plan.initial_state[3]), float(plan.initial_state[1])
+    return Scenario(
+        name="from_plan_state", height=min(max(height, 0.0), 5000.0), forward_speed=min(max(speed, 0.0), 120.0),
+        failure_time=0.0, noise=noise or SensorNoise(), seed=seed,
+    )  # fmt: skip
 
 
 def fly_open_loop(vehicle: SimulatedVehicle, plan: LandingPlan, latency: float) -> TouchdownReport:
@@ -198,17 +217,49 @@ def verify_robust(
     Raises:
         ValueError: the plan starts from another state, or the scenario has its own mismatch.
     """
-    policy = policy or ClosedLoopSettings()
     state = failure_state(scenario, planner.airframe)
     if plan is None:
         plan = planner.plan(state)
     elif not np.allclose(plan.initial_state[[0, 1, 2, 3, 5]], state[[0, 1, 2, 3, 5]], rtol=0.0, atol=_STATE_TOLERANCE):
         raise ValueError(f"the plan starts from {plan.initial_state}, not from the scenario's failure state {state}")
+    return _fly_models(scenario, planner, models, policy, plan, design, stop_at_first_failure, start=None)
+
+
+def verify_plan_robust(
+    plan: LandingPlan,
+    planner: LandingPlanner,
+    models: Sequence[PerturbedModel],
+    policy: ClosedLoopSettings | None = None,
+    design: str = "",
+    stop_at_first_failure: bool = False,
+    noise: SensorNoise | None = None,
+) -> RobustVerdict:
+    """:func:`verify_robust` for a plan made from any state (e.g. the planner node's plan at a failure).
+
+    Every vehicle starts at the failure in the plan's initial state (y, v, Ω, h, z, P), holding the plan's
+    initial control; the open loop flies the plan after each model's latency, the closed loop plans from
+    there as the planner node does.
+    """
+    scenario = scenario_at(plan, noise)
+    return _fly_models(scenario, planner, models, policy, plan, design, stop_at_first_failure, start=plan)
+
+
+def _fly_models(
+    scenario: Scenario,
+    planner: LandingPlanner,
+    models: Sequence[PerturbedModel],
+    policy: ClosedLoopSettings | None,
+    plan: LandingPlan,
+    design: str,
+    stop_at_first_failure: bool,
+    start: LandingPlan | None,
+) -> RobustVerdict:
+    policy = policy or ClosedLoopSettings()
     open_loop, closed_loop = [], []
     for model in models:
-        vehicle = model_vehicle(scenario, model, planner.airframe, planner.settings)
+        vehicle = model_vehicle(scenario, model, planner.airframe, planner.settings, start)
         open_loop.append(ModelOutcome(model, fly_open_loop(vehicle, plan, model.latency)))
-        vehicle = model_vehicle(scenario, model, planner.airframe, planner.settings)
+        vehicle = model_vehicle(scenario, model, planner.airframe, planner.settings, start)
         result = fly_closed_loop(vehicle, planner, dataclasses.replace(policy, latency=model.latency))
         closed_loop.append(ModelOutcome(model, result.touchdown, result.plans, result.failed_plans))
         if stop_at_first_failure and not closed_loop[-1].within_limits:

@@ -385,10 +385,19 @@ class SimulatedVehicle:
         settings: planner settings (the replay tolerance, the rotor-speed margin, and the method: the touchdown judges
             the rotor by the rule of the plans flown, so ``flyable`` allows the touchdown rotor limit below the
             commit height).
+        failure_state: start at the failure in this state (y, v, Ω, h, z, P, SI; P the power left) instead of
+            level trim at the scenario's height and speed, e.g. a measured state a plan was made from; the
+            scenario's ``failure_time`` must then be 0.
+        failure_controls: (C_T, θ) held from that start until a schedule takes over (with ``failure_state``).
     """
 
     def __init__(
-        self, scenario: Scenario, airframe: Airframe | None = None, settings: PlannerSettings | None = None
+        self,
+        scenario: Scenario,
+        airframe: Airframe | None = None,
+        settings: PlannerSettings | None = None,
+        failure_state: np.ndarray | None = None,
+        failure_controls: np.ndarray | None = None,
     ) -> None:
         self.scenario = scenario
         self.nominal_airframe = airframe if airframe is not None else load_airframe(scenario.airframe)
@@ -411,7 +420,21 @@ class SimulatedVehicle:
         self._rotor_range = (math.inf, -math.inf)
         self._rotor_low_above_commit = math.inf  # flyable plans: the in-flight limit holds above the commit height
         self._in_touchdown_set = False
+        if failure_state is not None:
+            self._start_at_failure(np.asarray(failure_state, float), failure_controls)
         self.history: list[tuple[float, np.ndarray]] = [(0.0, self.state.copy())]
+
+    def _start_at_failure(self, state: np.ndarray, controls: np.ndarray | None) -> None:
+        if self.scenario.failure_time != 0.0:
+            raise ValueError("a vehicle started in a failure state needs the scenario's failure_time 0")
+        if state.shape != (6,) or not np.all(np.isfinite(state)):
+            raise ValueError(f"failure_state must be 6 finite numbers (y, v, Ω, h, z, P), got {state!r}")
+        if controls is None or np.shape(controls) != (2,) or not np.all(np.isfinite(controls)):
+            raise ValueError(f"failure_controls must be (C_T, θ), got {controls!r}")
+        self.state = state.copy()
+        self._held_controls = np.asarray(controls, float).copy()
+        self.phase = "autorotation"
+        self._note_sample(self.state)
 
     @property
     def engine_failed(self) -> bool:

@@ -63,6 +63,7 @@ __all__ = [
     "TOPIC_LIVE_REACHABILITY",
     "TOPIC_ODOMETRY",
     "TOPIC_PLAN_STATUS",
+    "TOPIC_ROBUST_VERDICT",
     "TOPIC_ROTOR",
     "TOPIC_ROTOR_STATE",
     "TOPIC_SAFETY_STATUS",
@@ -107,6 +108,7 @@ TOPIC_LIVE_REACHABILITY = "/helireach/live_reachability"
 TOPIC_LANDING_TRAJECTORY = "/helireach/landing_trajectory"
 TOPIC_LANDING_PATH = "/helireach/landing_path"
 TOPIC_PLAN_STATUS = "/helireach/plan_status"
+TOPIC_ROBUST_VERDICT = "/helireach/robust_verdict"
 TOPIC_TOUCHDOWN = "/helireach/touchdown"
 TOPIC_DIAGNOSTICS = "/diagnostics"
 
@@ -177,12 +179,11 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(
             TOPIC_SAFETY_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_envelope_status"
         ),
-        TopicSpec(
-            TOPIC_LIVE_REACHABILITY, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"
-        ),
+        TopicSpec(TOPIC_LIVE_REACHABILITY, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_TRAJECTORY, "trajectory_msgs/msg/JointTrajectory", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_PATH, "nav_msgs/msg/Path", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_PLAN_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
+        TopicSpec(TOPIC_ROBUST_VERDICT, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_TOUCHDOWN, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_sim_vehicle"),
         TopicSpec(TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", STREAM_QOS, "every helireach node"),
     )

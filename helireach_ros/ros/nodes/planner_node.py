@@ -78,6 +78,15 @@ previous one (from that state, under the current plan's controls) and updates co
 ẏ, v̇, Ω̇ by ``disturbance_gain`` of the error; the re-plan (NLP and replay) is made for the model plus them, and
 its status reports them. The failure plan itself has none (nothing is known yet).
 
+**Robust verification** (``robust_verification``, off by default; :mod:`helireach_ros.core.background_verification`).
+Each safe failure plan (the refined one, solved from the state at the failure) is published at once, flagged
+``robust: pending``, and then flown through the uncertainty set's design (``robust_uncertainty``, '' =
+``config/uncertainty.yaml``): closed loop with this node's re-planning policy and each model's latency, stopping at the
+first model that fails, in one worker process at the lowest CPU priority. Its verdict (pending, then robust or not,
+with counts and the reason) goes out on ``/helireach/robust_verdict`` (latched), keyed by failure and state stamp.
+Off by default: on a 2-core machine the verification (~3–50 s of CPU per plan) takes the idle CPU the re-plans leave,
+and a standby plan, a fallback or a re-plan is not verified robustly.
+
 Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """
 
@@ -142,6 +151,7 @@ _PLAN_HISTORY = 200  # published plans kept for inspection (demo, tests)
 _ROTOR_NOISE_TOLERANCE = 0.01  # fraction of Ω₀ a measured rotor speed may lie outside its limits as noise
 _POOL_READY_TIMEOUT_S = 60.0  # start-up waits at most this long for one ready solver worker
 _MIN_SOLVE_TIMEOUT_S = 1.0  # the default solve_timeout: the deadline, but at least this
+_NO_REPLANNING_PERIOD_S = 1e9  # replan_period 0 (re-planning off): the closed loop of the robust check flies one plan
 _QUEUE_WAIT_S = 5.0  # a failure job no worker took within solve_timeout + this is withdrawn (all workers down)
 _LIVE_TIMEOUT_FACTOR = 4.0  # live job timeout = this × solve_timeout (the cold check may solve twice)
 
@@ -236,6 +246,14 @@ class LandingPlannerNode(Node):
         self._disturbance_gain = declare(
             "disturbance_gain", 0.3, "fraction of each interval's prediction error the estimate takes", (0.01, 1.0)
         )
+        robust_verification = declare(
+            "robust_verification",
+            False,
+            "verify each failure plan robustly in a low-priority process (the plan is published 'robust: pending')",
+        )
+        self._robust_uncertainty = declare(
+            "robust_uncertainty", "", "uncertainty set of the robust verification ('' = config/uncertainty.yaml)"
+        )
         self._live_settings = (
             LiveSettings(
                 rate_hz=live_rate,
@@ -272,9 +290,12 @@ class LandingPlannerNode(Node):
         self._weights: WeightTracker | None = None  # None: no estimation (off, or not configured)
         self._weights_off_reason = "estimate_weight is false"
         self._built_weights: set[float] = set()  # in-process planners built (solver_workers = 0)
+        self._robust: Any | None = None  # a BackgroundRobustVerification when robust_verification is on
         try:
             self._setup_core(load_aircraft, settings_file, envelope_file, warm_up, solver_workers)
             self._setup_weight_estimation()
+            if robust_verification:
+                self._setup_robust_verification()
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
@@ -293,6 +314,9 @@ class LandingPlannerNode(Node):
         )
         self._status_publisher = self.create_publisher(
             DiagnosticStatus, rm.TOPIC_PLAN_STATUS, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )
+        self._robust_publisher = self.create_publisher(
+            DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
@@ -373,6 +397,32 @@ class LandingPlannerNode(Node):
             f"planner ready for {self.airframe.name} ({self.settings.method}, {self.settings.intervals} intervals) "
             f"in {self.startup_s:.2f} s, {where}; {self._envelope_note}"
         )
+
+    def _setup_robust_verification(self) -> None:
+        """The background robust verification of failure plans: the uncertainty set's design, the node's policy."""
+        from helireach_ros.core.background_verification import BackgroundRobustVerification
+        from helireach_ros.core.closed_loop import ClosedLoopSettings
+        from helireach_ros.core.uncertainty import DEFAULT_UNCERTAINTY_FILE, load_uncertainty_set
+
+        uncertainty = load_uncertainty_set(self._robust_uncertainty or DEFAULT_UNCERTAINTY_FILE)
+        models = uncertainty.verification_design()
+        policy = ClosedLoopSettings(
+            replan_period=self._replan_period if self._replan_period > 0.0 else _NO_REPLANNING_PERIOD_S,
+            min_height=self._replan_min_height,
+            min_remaining=self._replan_min_remaining,
+            estimate_disturbance=self._estimate_disturbance,
+            disturbance=DisturbanceSettings(gain=self._disturbance_gain),
+        )
+        design = f"resolution-IV corners of {uncertainty.name!r} ({len(models)})"
+        self._robust = BackgroundRobustVerification(models, design, policy)
+        self._robust.prepare(self.airframe, self._robust_settings())
+        self.get_logger().info(f"robust verification of failure plans on: {design}, in a low-priority process")
+
+    def _robust_settings(self) -> Any:
+        """The planner settings with this node's reaction delay (what its failure plans are made with)."""
+        if self._reaction_delay == self.settings.reaction_delay_s:
+            return self.settings
+        return self.settings.replace(reaction_delay_s=self._reaction_delay)
 
     def _setup_weight_estimation(self) -> None:
         """The weight tracker, its band from the uncertainty set; an unreadable set disables it (file's weight)."""
@@ -752,6 +802,8 @@ class LandingPlannerNode(Node):
         self._pause_live()  # the jobs failed by closing the pool are not verdicts
         if self._pool is not None:
             self._pool.close()
+        if self._robust is not None:
+            self._robust.close()
         self._solver_thread.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 
@@ -783,7 +835,10 @@ class LandingPlannerNode(Node):
             if not ((retry and failure.published) or self._standby_is_current(failure)):
                 self._publish_fallback(failure, state, stamp_ns, reason)  # a verified standby beats a fallback
             return
-        self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False)
+        robust = self._robust is not None and plan.safe
+        self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False, robust_pending=robust)
+        if robust:  # after publishing: off the failure path
+            self._submit_robust(failure, plan, stamp_ns)
         if self._estimate_disturbance and failure.disturbance is None:  # after publishing: off the failure path
             weight = self.episode_weight.gross_weight
             model = self.airframe if weight == self.airframe.gross_weight else self.airframe.with_conditions(weight)
@@ -823,6 +878,7 @@ class LandingPlannerNode(Node):
             return None, f"{type(error).__name__}: {error}"
 
     def _on_deadline(self) -> None:
+        self._publish_robust_verdicts()
         with self._lock:
             failure = self._failure
             if failure is None or not failure.active or failure.published or failure.deadline_handled:
@@ -999,11 +1055,14 @@ class LandingPlannerNode(Node):
         replan: bool,
         standby: bool = False,
         messages: PlanMessages | None = None,
+        robust_pending: bool = False,
     ) -> None:
         """Publishes a converged plan (safe, unverified or unsafe) as trajectory, path and status.
 
         ``standby``: the live verdict's plan published on the failure (flagged so; the refined plan replaces it).
         ``messages``: its trajectory and path built beforehand (used only if they match plan, stamp and frames).
+        ``robust_pending``: its robust verification follows (``robust: pending``; the verdict on
+        ``/helireach/robust_verdict``).
         """
         live_weight = self._live_weight or WeightChoice(self.airframe.gross_weight, "file", 0.0, "")
         weight = live_weight if standby else self.episode_weight
@@ -1043,6 +1102,8 @@ class LandingPlannerNode(Node):
                 "rotor_speed_source": rotor_source,
                 **self._common_values(failure, plan.initial_state, stamp_ns, weight),
             }
+            if robust_pending:
+                values.update(robust="pending", robust_design=self._robust.design)
             level_name, text = plan_verdict(plan, rotor_source)
             if standby:
                 state_age_s = (failure.event_stamp_ns - stamp_ns) * 1e-9
@@ -1059,6 +1120,44 @@ class LandingPlannerNode(Node):
                 del self.standby_plans[:-_PLAN_HISTORY]
         if not replan:
             fast_logging.info(self.get_logger(), f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
+
+    def _submit_robust(self, failure: FailureEpisode, plan: Any, stamp_ns: int) -> None:
+        """Queues the plan's robust verification and publishes its verdict as pending."""
+        weight = self.episode_weight.gross_weight
+        model = self.airframe if weight == self.airframe.gross_weight else self.airframe.with_conditions(weight)
+        key = (failure.failure_id, failure.event_stamp_ns, stamp_ns)
+        self._robust.submit(key, model, self._robust_settings(), plan)
+        self._publish_robust(key, None)
+
+    def _publish_robust_verdicts(self) -> None:
+        """Publishes the robust verdicts that came back (polled; the worker never calls into the node)."""
+        if self._robust is None:
+            return
+        for key, summary in self._robust.finished():
+            self._publish_robust(key, summary)
+            text = "robust" if summary.robust else f"NOT robust: {summary.reason}"
+            fast_logging.info(self.get_logger(), f"failure #{key[0]}: first plan {text} ({summary.seconds:.1f} s)")
+
+    def _publish_robust(self, key: tuple[int, int, int], summary: Any | None) -> None:
+        """The robust verdict of a failure plan (a RobustSummary), or None: pending."""
+        failure_id, failure_stamp_ns, stamp_ns = key
+        values: dict[str, Any] = {
+            "failure_id": failure_id, "failure_stamp_ns": failure_stamp_ns, "state_stamp_ns": stamp_ns,
+        }  # fmt: skip
+        if summary is None:
+            level, text = DiagnosticStatus.STALE, f"PENDING: robust verification running ({self._robust.design})"
+            values.update(robust="pending", robust_design=self._robust.design)
+        else:
+            values.update(summary.values())
+            if summary.robust:
+                level = DiagnosticStatus.OK
+                text = f"ROBUST: lands closed loop in all {summary.models_flown} models ({summary.design})"
+            else:
+                level = DiagnosticStatus.ERROR if summary.error else DiagnosticStatus.WARN
+                text = f"NOT ROBUST: {summary.reason}"
+        self._robust_publisher.publish(
+            rm.diagnostic_status(level, f"{self.get_name()}: robust verdict", text, self.airframe.name, values)
+        )
 
     def _publish_status_only(self, failure: FailureEpisode, text: str) -> None:
         self.get_logger().error(f"failure #{failure.failure_id}: {text}")
