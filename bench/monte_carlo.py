@@ -2,7 +2,7 @@
 
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
-     [--policies none weight disturbance weight+disturbance ...]
+     [--policies none weight disturbance weight+disturbance ...] [--truth-check]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -26,6 +26,11 @@ the touchdown descent-rate and forward-speed distributions, the rotor-speed rang
 lower and upper half of each range (what the failures lean on), each failure's seed;
 then (unless ``--no-weight-check``) the issue's acceptance case, an unknown +5 % weight from 500 ft / 75 kt,
 for a few latencies and noise seeds. Parallel over ``--workers`` local processes.
+
+``--truth-check``: for every run also solve the landing in the run's *true* model (a planner built for the drawn
+airframe, cold IPOPT from the same initial state). A run whose true model has no safe landing from there cannot be
+landed within limits by any re-planning policy of this NLP (up to IPOPT's local optimum); the report splits the
+failures into those and the ones the policy lost.
 
 Re-planning policies (``--policies``, each ``none`` or a ``+``-joined set; every policy is run with every
 margin setting, on the same draws): ``weight``: plan for the gross weight estimated from the engine power of
@@ -52,10 +57,11 @@ from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.disturbance import DisturbanceSettings
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.robust_verification import model_vehicle
 from helireach_ros.core.settings import PlannerSettings, load_settings
-from helireach_ros.core.simulation import Scenario, SensorNoise, load_scenario
+from helireach_ros.core.simulation import Scenario, load_scenario
 from helireach_ros.core.uncertainty import (
     DEFAULT_UNCERTAINTY_FILE,
     PerturbedModel,
@@ -159,9 +165,19 @@ def closed_loop_settings(policy: str, latency: float, disturbance_gain: float) -
     return ClosedLoopSettings(latency=latency, disturbance=DisturbanceSettings(gain=disturbance_gain), **switches)
 
 
-def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int, str, float]) -> dict:
+def truth_landing(airframe: Airframe, settings: PlannerSettings, model: PerturbedModel, height_ft: float,
+                  speed_kt: float) -> tuple[bool, float]:  # fmt: skip
+    """(safe, J) of the landing planned in the run's true model itself, cold, from the run's initial state."""
+    true_airframe = model.airframe(airframe)
+    plan = get_planner(true_airframe, settings).plan(initial_state_after_failure(true_airframe, height_ft * FT,
+                                                                                 speed_kt * KT))  # fmt: skip
+    return plan.safe, plan.value
+
+
+def fly(task: tuple) -> dict:
     """One closed-loop landing (a worker process's job)."""
-    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, policy, disturbance_gain = task
+    uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, policy, disturbance_gain = task[:9]
+    truth_check = len(task) > 9 and task[9]
     airframe, settings, _ = _context(uncertainty_file)
     planner = get_planner(margin.planning_airframe(airframe), settings)
     scenario = Scenario(
@@ -172,7 +188,11 @@ def fly(task: tuple[str, Margin, float, float, PerturbedModel, SensorNoise, int,
     result = fly_closed_loop(vehicle, planner, closed_loop_settings(policy, model.latency, disturbance_gain))
     report = result.touchdown
     omega0 = airframe.nominal_rotor_speed
+    truth_safe, truth_value = truth_landing(airframe, settings, model, height_ft, speed_kt) if truth_check else (
+        None, math.nan)  # fmt: skip
     return {
+        "truth_safe": truth_safe,
+        "truth_value": truth_value,
         "within": report.within_limits,
         "descent_ft_s": report.descent_rate / FT,
         "speed_kt": abs(report.forward_speed) / KT,
@@ -237,10 +257,21 @@ def report(
             halves[draws[seed].values()[name] > 0.5 * (interval.low + interval.high)].append(r["within"])
         print(f"  {name:24} " + " | ".join(_rate(sum(half), len(half)) for half in halves))
     failures = [(seed, r) for seed, r in zip(seeds, results, strict=True) if not r["within"]]
-    print(f"failures ({len(failures)}): seed, initial state, latency, reason")
+    if results and results[0]["truth_safe"] is not None:
+        attainable = [r for r in results if r["truth_safe"]]
+        print(
+            f"truth check: {len(results) - len(attainable)} of {len(results)} runs have no safe landing in their own "
+            f"true model (cold IPOPT), {sum(not r['truth_safe'] for _, r in failures)} of the {len(failures)} "
+            f"failures; runs with one: {_rate(sum(r['within'] for r in attainable), len(attainable))}"
+        )
+    print(f"failures ({len(failures)}): seed, initial state, latency, reason[, J of the true model's own plan]")
     for seed, r in failures:
         height, speed, _ = states[seed % len(states)]
-        print(f"  seed {seed:4d}  {height:4.0f} ft {speed:4.0f} kt  latency {draws[seed].latency:.2f} s  {r['reason']}")
+        truth = "" if r["truth_safe"] is None else f"; true model's own plan J {r['truth_value']:+.3f}"
+        print(
+            f"  seed {seed:4d}  {height:4.0f} ft {speed:4.0f} kt  latency {draws[seed].latency:.2f} s  "
+            f"{r['reason']}{truth}"
+        )
 
 
 def main() -> None:
@@ -254,6 +285,9 @@ def main() -> None:
     parser.add_argument("--no-weight-check", action="store_true", help="skip the +5 %% weight acceptance case")
     parser.add_argument(
         "--policies", type=parse_policy, nargs="+", default=["none"], help="re-planning policies (see the docstring)"
+    )
+    parser.add_argument(
+        "--truth-check", action="store_true", help="also solve each run's landing in its true model (see docstring)"
     )
     parser.add_argument(
         "--disturbance-gain", type=float, default=DisturbanceSettings().gain, help="the disturbance filter's gain"
@@ -278,7 +312,8 @@ def main() -> None:
             started = time.perf_counter()
             tasks = [
                 (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
-                 uncertainty.sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain)
+                 uncertainty.sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain,
+                 arguments.truth_check)
                 for seed in seeds
             ]  # fmt: skip
             results = run_tasks(tasks, arguments.workers)

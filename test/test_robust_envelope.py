@@ -67,6 +67,7 @@ def test_in_the_exact_model_every_safe_node_is_robust_and_the_verdict_is_stored(
     assert np.all(exact_model.robust_status == "robust")
     assert np.all(exact_model.arrays["robust_models_flown"] == 1)
     assert np.all(exact_model.arrays["robust_closed_loop_landed"] == 1)
+    assert np.all(exact_model.arrays["robust_failure_attainable"] == -1)  # no failing model to ask about
     metadata = exact_model.metadata["robust"]
     assert metadata["design"] == "resolution-IV corners of 'test' (1)" and metadata["counts"]["robust"] == 4
     assert metadata["cost"]["nodes_flown"] == 4 and metadata["cost"]["seconds_per_node_mean"] > 0
@@ -87,6 +88,11 @@ def test_a_model_whose_closed_loop_fails_makes_the_node_not_robust_and_stops_its
     assert np.all(heavy.robust_status == "not_robust")
     assert np.all(heavy.arrays["robust_models_flown"] == 1)  # stopped at the first failure
     assert np.all(heavy.arrays["robust_closed_loop_landed"] == 0)
+    # whether the failing model could land at all, with a planner that knows it: asked, and recorded
+    attainable = heavy.arrays["robust_failure_attainable"]
+    assert np.all(np.isin(attainable, (0, 1)))
+    robust = heavy.metadata["robust"]
+    assert robust["not_robust_failing_model_has_no_landing"] + robust["not_robust_failing_model_has_a_landing"] == 4
     answer = heavy.query(500 * FT, 75 * KT, verdict="robust")
     assert answer.status == "not_robust" and answer.verdict == "robust" and answer.margin < 0
     assert heavy.query(500 * FT, 75 * KT).status == "safe"  # nominally it still is

@@ -291,7 +291,9 @@ def _print_robust(path: Path, envelope) -> None:
     print(
         f"{path}: robust verdicts ({robust['design']}): {robust['counts']}; {cost['nodes_flown']} nodes flown in "
         f"{cost['wall_time_s']:.0f} s on {cost['executor']} ({cost['seconds_per_node_mean'] or 0:.1f} s per node, "
-        f"{cost['plans_solved']} plans solved)"
+        f"{cost['plans_solved']} plans solved); of the not robust nodes, the first failing model has no safe "
+        f"landing of its own at {robust['not_robust_failing_model_has_no_landing']}, has one at "
+        f"{robust['not_robust_failing_model_has_a_landing']}"
     )
 
 

@@ -120,6 +120,7 @@ ROBUST_CODES = {"robust": 0, "not_robust": 1, "nominal_not_safe": 2, "not_comput
 (robust needs nominal safety); ``not_computed`` not flown (e.g. a climb slice other than level flight)."""
 ROBUST_ARRAYS = (
     "robust_code", "robust_models_flown", "robust_closed_loop_landed", "robust_open_loop_landed", "robust_seconds",
+    "robust_failure_attainable",
 )  # fmt: skip
 """The per-node arrays of a robust verdict (all or none)."""
 VERDICTS = ("nominal", "robust")

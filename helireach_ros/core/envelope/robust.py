@@ -20,6 +20,10 @@ verdict, and every reader treats it as before):
 ``robust_closed_loop_landed``        of those, landed within the true limits
 ``robust_open_loop_landed``          open-loop flights (the same models) that landed (reported only)
 ``robust_seconds`` (float32)         wall time of the node's verification, s
+``robust_failure_attainable`` (int8) for a ``not_robust`` node: 1 when the first failing model has a safe
+                                     landing of its own from the node (its own planner, cold: the policy
+                                     lost it), 0 when it has none (no planner of this NLP could land it,
+                                     up to IPOPT's local optimum); −1 otherwise
 ===================================  =====================================================================
 
 The metadata's ``robust`` entry names the design, the models, the uncertainty set, the re-planning policy and
@@ -97,6 +101,7 @@ class NodeRobustness:
     seconds: float
     plans: int
     failing_model: str = ""
+    failure_attainable: int = -1
 
 
 def verify_node(
@@ -107,6 +112,7 @@ def verify_node(
     The nominal plan is re-solved from the stored one (warm start) so the flights start from the planner's
     own plan; if that plan is not safe the node is ``nominal_not_safe`` without a flight.
     """
+    from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import get_planner
     from helireach_ros.core.robust_verification import failure_state, verify_robust
     from helireach_ros.core.simulation import Scenario
@@ -121,7 +127,16 @@ def verify_node(
         scenario, planner, job.models(), job.policy, plan=plan, design=job.design(),
         stop_at_first_failure=job.stop_at_first_failure,
     )  # fmt: skip
+    attainable = -1
+    if verdict.failing_models:
+        failing = next(outcome.model for outcome in verdict.closed_loop if not outcome.within_limits)
+        true_airframe = failing.airframe(job.airframe)
+        own = get_planner(true_airframe, job.settings).plan(
+            initial_state_after_failure(true_airframe, height, speed, power_fraction)
+        )
+        attainable = int(own.safe)
     return NodeRobustness(
+        failure_attainable=attainable,
         code=ROBUST_CODES["robust" if verdict.robust else "not_robust"],
         models_flown=len(verdict.closed_loop),
         closed_loop_landed=sum(outcome.within_limits for outcome in verdict.closed_loop),
@@ -168,6 +183,7 @@ def add_robust_verdicts(
     codes = np.full(shape, ROBUST_CODES["not_computed"], np.int8)
     flown, landed, open_landed = (np.zeros(shape, np.int16) for _ in range(3))
     seconds = np.zeros(shape, np.float32)
+    attainable = np.full(shape, -1, np.int8)
     tasks = []
     for slice_index in level:
         for row, column in np.ndindex(envelope.heights.size, envelope.speeds.size):
@@ -183,14 +199,17 @@ def add_robust_verdicts(
     for node, result in executor.map_unordered(_node_task, tasks):
         codes[node], flown[node], landed[node] = result.code, result.models_flown, result.closed_loop_landed
         open_landed[node], seconds[node] = result.open_loop_landed, result.seconds
+        attainable[node] = result.failure_attainable
         plans += result.plans
         progress.advance()
     progress.finish()
     wall = time.perf_counter() - started
     new_arrays = dict(arrays)
-    new_arrays.update(zip(ROBUST_ARRAYS, (codes, flown, landed, open_landed, seconds), strict=True))
+    new_arrays.update(zip(ROBUST_ARRAYS, (codes, flown, landed, open_landed, seconds, attainable), strict=True))
     metadata = envelope.metadata
     metadata["robust"] = _robust_metadata(job, codes, seconds, plans, wall, executor.description, command)
+    metadata["robust"]["not_robust_failing_model_has_no_landing"] = int(np.sum(attainable == 0))
+    metadata["robust"]["not_robust_failing_model_has_a_landing"] = int(np.sum(attainable == 1))
     return Envelope(new_arrays, metadata)
 
 
