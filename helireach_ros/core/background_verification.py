@@ -19,8 +19,8 @@ import os
 import threading
 import time
 from collections.abc import Hashable, Sequence
-from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
+from multiprocessing.pool import AsyncResult
 from typing import Any
 
 from helireach_ros.core.airframe import Airframe
@@ -123,6 +123,8 @@ class BackgroundRobustVerification:
         policy: the closed loop's re-planning policy (each model's latency replaces its latency).
         stop_at_first_failure: fly no further model once one fails.
         niceness: added to the worker's nice value (19: only idle CPU).
+        timeout_s: a verification without an answer this long after it was queued is given up (reported as an
+            error: a worker that died takes its job with it, and a starved one says nothing).
     """
 
     def __init__(
@@ -132,49 +134,63 @@ class BackgroundRobustVerification:
         policy: ClosedLoopSettings | None = None,
         stop_at_first_failure: bool = True,
         niceness: int = 19,
+        timeout_s: float = 900.0,
     ) -> None:
         self.models = tuple(models)
+        self.timeout_s = timeout_s
         self.design = design
         self.policy = policy or ClosedLoopSettings()
         self.stop_at_first_failure = stop_at_first_failure
+        # A multiprocessing pool, not a ProcessPoolExecutor: close() must kill a verification that is running (tens
+        # of seconds), which only Pool.terminate does; a worker that dies is replaced by the pool.
         context = multiprocessing.get_context("forkserver")
-        self._pool = ProcessPoolExecutor(1, mp_context=context, initializer=_lower_priority, initargs=(niceness,))
+        self._pool = context.Pool(1, initializer=_lower_priority, initargs=(niceness,))
         self._lock = threading.Lock()
-        self._jobs: list[tuple[Hashable, Future]] = []
+        self._jobs: list[tuple[Hashable, AsyncResult, float]] = []  # (key, job, monotonic time queued)
 
-    def prepare(self, airframe: Airframe, settings: PlannerSettings) -> Future:
+    def prepare(self, airframe: Airframe, settings: PlannerSettings) -> AsyncResult:
         """Builds the worker's planner for this airframe and settings ahead of the first plan."""
-        return self._pool.submit(_build, airframe, settings)
+        return self._pool.apply_async(_build, (airframe, settings))
 
     def submit(self, key: Hashable, airframe: Airframe, settings: PlannerSettings, plan: LandingPlan) -> None:
         """Queues ``plan`` (made with ``airframe`` and ``settings``); its summary comes back under ``key``."""
-        future = self._pool.submit(
-            summarise_verification, airframe, settings, plan, self.models,
-            dataclasses.replace(self.policy), self.design, self.stop_at_first_failure,
+        job = self._pool.apply_async(
+            summarise_verification,
+            (airframe, settings, plan, self.models, dataclasses.replace(self.policy), self.design,
+             self.stop_at_first_failure),
         )  # fmt: skip
         with self._lock:
-            self._jobs.append((key, future))
+            self._jobs.append((key, job, time.monotonic()))
 
     @property
     def pending(self) -> int:
         """Verifications queued or running."""
         with self._lock:
-            return sum(not future.done() for _, future in self._jobs)
+            return sum(not job.ready() for _, job, _ in self._jobs)
 
     def finished(self) -> list[tuple[Hashable, RobustSummary]]:
-        """The verifications done since the last call, in submission order (a crashed worker: an error summary)."""
+        """The verifications done (or given up) since the last call, in submission order; a failed or timed-out
+        job gives an error summary."""
+        now = time.monotonic()
         with self._lock:
-            done = [(key, future) for key, future in self._jobs if future.done()]
-            self._jobs = [(key, future) for key, future in self._jobs if not future.done()]
+            done = [entry for entry in self._jobs if entry[1].ready() or now - entry[2] > self.timeout_s]
+            self._jobs = [entry for entry in self._jobs if entry not in done]
         results = []
-        for key, future in done:
+        for key, job, queued in done:
+            if not job.ready():
+                reason = f"robust verification failed: no verdict within {self.timeout_s:g} s"
+                results.append((key, self._error(reason, now - queued)))
+                continue
             try:
-                results.append((key, future.result()))
-            except Exception as error:  # the worker died (BrokenProcessPool) or the job could not be sent
-                reason = f"robust verification failed: {type(error).__name__}: {error}"
-                results.append((key, RobustSummary(False, reason, self.design, len(self.models), 0, 0, 0, 0.0, True)))
+                results.append((key, job.get()))
+            except Exception as error:  # e.g. a plan that could not be sent to the worker
+                results.append((key, self._error(f"robust verification failed: {type(error).__name__}: {error}", 0.0)))
         return results
 
+    def _error(self, reason: str, seconds: float) -> RobustSummary:
+        return RobustSummary(False, reason, self.design, len(self.models), 0, 0, 0, seconds, error=True)
+
     def close(self) -> None:
-        """Stops the worker; queued verifications are dropped."""
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stops the worker at once; queued and running verifications are dropped."""
+        self._pool.terminate()
+        self._pool.join()
