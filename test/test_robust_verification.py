@@ -8,10 +8,12 @@ the failing corners have no safe landing of their own from there, the last test)
 from __future__ import annotations
 
 import dataclasses
+import time
 
 import numpy as np
 import pytest
 
+from helireach_ros.core.background_verification import BackgroundRobustVerification
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.robust_verification import failure_state, model_vehicle, verify_plan_robust, verify_robust
@@ -150,3 +152,20 @@ def test_with_a_quarter_of_the_default_ranges_the_500_ft_75_kt_plan_is_robust(sc
     assert verdict.robust, verdict.reason
     assert len(verdict.closed_loop) == 16 and all(outcome.within_limits for outcome in verdict.closed_loop)
     assert not any(outcome.within_limits for outcome in verdict.open_loop)
+
+
+def test_the_background_verification_gives_up_after_its_timeout_and_stops_at_once(scenario, planner) -> None:
+    """A verification without an answer is never left pending for ever: after timeout_s it is an error (never
+    robust); close() kills a running one (real worker process)."""
+    plan = planner.plan(failure_state(scenario, planner.airframe))
+    background = BackgroundRobustVerification([PerturbedModel({}, latency=0.05)], "exact model", timeout_s=0.0)
+    try:
+        background.submit("first plan", planner.airframe, planner.settings, plan)
+        [(key, summary)] = background.finished()
+        assert key == "first plan" and summary.error and not summary.robust
+        assert summary.reason == "robust verification failed: no verdict within 0 s"
+        assert background.finished() == []
+    finally:
+        started = time.monotonic()
+        background.close()
+        assert time.monotonic() - started < 10.0
