@@ -192,9 +192,11 @@ def test_the_sim_vehicle_flies_a_mismatch_preset_and_refuses_an_unknown_one(cont
 
 
 def test_the_demo_command_line_passes_the_preset_and_the_estimate_to_the_nodes() -> None:
+    robust_on = ["-p", "helireach_planner:robust_verification:=true"]  # the demo verifies its plan robustly
     assert demo_ros_arguments("weight+5", True) == [
-        "-p", "helireach_sim_vehicle:mismatch:=weight+5", "-p", "helireach_planner:estimate_weight:=true",
+        "-p", "helireach_sim_vehicle:mismatch:=weight+5", "-p", "helireach_planner:estimate_weight:=true", *robust_on,
     ]  # fmt: skip
-    assert demo_ros_arguments(None, None) == []  # make demo: today's scenario, the planner's own parameter
+    assert demo_ros_arguments(None, None) == robust_on  # make demo: today's scenario, the planner's own weight
+    assert demo_ros_arguments(None, None, False) == ["-p", "helireach_planner:robust_verification:=false"]
     with pytest.raises(ValueError, match="unknown mismatch preset"):
         demo_ros_arguments("heavy", None)

@@ -18,6 +18,10 @@ the gross weight before the failure (planner parameter ``estimate_weight``; off 
 unchanged); ``--no-estimate-weight`` / ``--estimate-weight`` choose explicitly. The summary names the preset and the
 weight the planner used.
 
+The planner verifies its failure plan robustly in the background (planner parameter ``robust_verification``, on
+in the demo, ``--no-robust-verification`` to turn it off): the plan goes out flagged ``robust: pending`` and the
+summary gives the verdict, or says it was still pending at touchdown.
+
 Run: ``python -m helireach_ros.cli.demo --out out [--hold] [--no-display] [--scenario NAME] [--mismatch NAME]``.
 """
 
@@ -54,6 +58,7 @@ class DemoResult:
             made after the failure (the standby plan is not it).
         standby_plan: the standby plan record (the live plan published on the failure), or None.
         plans: every plan published for the failure.
+        robust_verdicts: the planner's robust verdicts of the failure's plans (None: pending), in order.
         log_path: the MCAP log.
         message_count: messages recorded.
         track: N × 2 (height m, speed m/s) flown.
@@ -67,6 +72,7 @@ class DemoResult:
         self.first_plan: Any = None
         self.standby_plan: Any = None
         self.plans: list[Any] = []
+        self.robust_verdicts: list[Any] = []  # RobustSummary (None: pending) of the failure's plans, in order
         self.replans_failed = 0
         self.log_path: Path | None = None
         self.message_count = 0
@@ -98,6 +104,7 @@ def run_demo(
     executor: str = DEFAULT_EXECUTOR,
     mismatch: str | None = None,
     estimate_weight: bool | None = None,
+    robust_verification: bool = True,
 ) -> DemoResult:
     """Runs the demo (see the module docstring) and returns what it produced.
 
@@ -125,7 +132,7 @@ def run_demo(
         scenario=scenario,
         extra_nodes=extra,
         context=context,
-        ros_args=demo_ros_arguments(mismatch, estimate_weight),
+        ros_args=demo_ros_arguments(mismatch, estimate_weight, robust_verification),
         executor=executor,
         command="python -m helireach_ros.cli.demo",
     )
@@ -165,6 +172,7 @@ def run_demo(
             result.planned_weight = planner.episode_weight if planner.planner is not None else None
             result.file_gross_weight = planner.airframe.gross_weight if planner.planner is not None else math.nan
             result.plans = [record for record in planner.published_plans if record.failure_id == 1]
+            result.robust_verdicts = [summary for key, summary in planner.robust_verdicts if key[0] == 1]
             standby = [record for record in result.plans if planner.is_standby(record)]
             result.standby_plan = standby[0] if standby else None
             converged = [record for record in result.plans if not record.fallback and not planner.is_standby(record)]
@@ -182,8 +190,11 @@ def run_demo(
     return result
 
 
-def demo_ros_arguments(mismatch: str | None, estimate_weight: bool | None) -> list[str]:
-    """The ``-p`` arguments for a mismatch preset (the vehicle) and the planner's ``estimate_weight``.
+def demo_ros_arguments(
+    mismatch: str | None, estimate_weight: bool | None, robust_verification: bool = True
+) -> list[str]:
+    """The ``-p`` arguments for a mismatch preset (the vehicle), the planner's ``estimate_weight`` and its
+    ``robust_verification``.
 
     Raises:
         ValueError: an unknown preset.
@@ -195,6 +206,7 @@ def demo_ros_arguments(mismatch: str | None, estimate_weight: bool | None) -> li
         arguments += ["-p", f"helireach_sim_vehicle:mismatch:={mismatch}"]
     if estimate_weight is not None:
         arguments += ["-p", f"helireach_planner:estimate_weight:={'true' if estimate_weight else 'false'}"]
+    arguments += ["-p", f"helireach_planner:robust_verification:={'true' if robust_verification else 'false'}"]
     return arguments
 
 
@@ -271,6 +283,15 @@ def summary(result: DemoResult) -> str:
         else ""
     )
     lines.append(f"  closed loop               : {replans} re-plans from the current state{error}")
+    if result.robust_verdicts:
+        final = next((summary for summary in reversed(result.robust_verdicts) if summary is not None), None)
+        if final is None:
+            robust = "pending at touchdown (a low-priority process; the verdict follows on /helireach/robust_verdict)"
+        elif final.robust:
+            robust = f"ROBUST: lands closed loop in all {final.models_flown} models ({final.design})"
+        else:
+            robust = f"NOT robust ({final.design}, {final.seconds:.0f} s): {final.reason}"
+        lines.append(f"  robust verification       : {robust}")
     touchdown = result.touchdown
     if touchdown is None:
         lines.append("  touchdown                 : none (timeout)")
@@ -322,6 +343,13 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="the planner plans for the gross weight it estimates before the failure (default: on with --mismatch, "
         "else the planner's parameter, off)",
     )
+    parser.add_argument(
+        "--robust-verification",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="verify the failure plan robustly in a low-priority process (planner parameter robust_verification; "
+        "default: on)",
+    )
     parser.add_argument("--hold", action="store_true", help="keep the nodes running after touchdown until Ctrl-C")
     parser.add_argument(
         "--no-display", dest="display", action="store_false", help="do not serve the cockpit display page"
@@ -350,6 +378,7 @@ def _run(arguments: argparse.Namespace) -> int:
             executor=arguments.executor,
             mismatch=arguments.mismatch,
             estimate_weight=arguments.estimate_weight,
+            robust_verification=arguments.robust_verification,
         )
     except (FileNotFoundError, ValueError) as error:  # a missing parameter file, a bad parameter or scenario
         print(f"helireach demo: {error}", file=sys.stderr)

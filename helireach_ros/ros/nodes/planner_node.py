@@ -291,6 +291,7 @@ class LandingPlannerNode(Node):
         self._weights_off_reason = "estimate_weight is false"
         self._built_weights: set[float] = set()  # in-process planners built (solver_workers = 0)
         self._robust: Any | None = None  # a BackgroundRobustVerification when robust_verification is on
+        self.robust_verdicts: list[tuple[tuple[int, int, int], Any | None]] = []  # published: (key, summary|None)
         try:
             self._setup_core(load_aircraft, settings_file, envelope_file, warm_up, solver_workers)
             self._setup_weight_estimation()
@@ -1158,6 +1159,8 @@ class LandingPlannerNode(Node):
         self._robust_publisher.publish(
             rm.diagnostic_status(level, f"{self.get_name()}: robust verdict", text, self.airframe.name, values)
         )
+        self.robust_verdicts.append((key, summary))
+        del self.robust_verdicts[:-_PLAN_HISTORY]
 
     def _publish_status_only(self, failure: FailureEpisode, text: str) -> None:
         self.get_logger().error(f"failure #{failure.failure_id}: {text}")
