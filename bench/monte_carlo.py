@@ -57,9 +57,8 @@ from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.disturbance import DisturbanceSettings
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import get_planner
-from helireach_ros.core.robust_verification import model_vehicle
+from helireach_ros.core.robust_verification import model_vehicle, own_landing
 from helireach_ros.core.settings import PlannerSettings, load_settings
 from helireach_ros.core.simulation import Scenario, load_scenario
 from helireach_ros.core.uncertainty import (
@@ -165,15 +164,6 @@ def closed_loop_settings(policy: str, latency: float, disturbance_gain: float) -
     return ClosedLoopSettings(latency=latency, disturbance=DisturbanceSettings(gain=disturbance_gain), **switches)
 
 
-def truth_landing(airframe: Airframe, settings: PlannerSettings, model: PerturbedModel, height_ft: float,
-                  speed_kt: float) -> tuple[bool, float]:  # fmt: skip
-    """(safe, J) of the landing planned in the run's true model itself, cold, from the run's initial state."""
-    true_airframe = model.airframe(airframe)
-    plan = get_planner(true_airframe, settings).plan(initial_state_after_failure(true_airframe, height_ft * FT,
-                                                                                 speed_kt * KT))  # fmt: skip
-    return plan.safe, plan.value
-
-
 def fly(task: tuple) -> dict:
     """One closed-loop landing (a worker process's job)."""
     uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, policy, disturbance_gain = task[:9]
@@ -188,8 +178,10 @@ def fly(task: tuple) -> dict:
     result = fly_closed_loop(vehicle, planner, closed_loop_settings(policy, model.latency, disturbance_gain))
     report = result.touchdown
     omega0 = airframe.nominal_rotor_speed
-    truth_safe, truth_value = truth_landing(airframe, settings, model, height_ft, speed_kt) if truth_check else (
-        None, math.nan)  # fmt: skip
+    truth_safe, truth_value = None, math.nan
+    if truth_check:
+        own = own_landing(model, airframe, settings, height_ft * FT, speed_kt * KT)
+        truth_safe, truth_value = own.safe, own.value
     return {
         "truth_safe": truth_safe,
         "truth_value": truth_value,

@@ -8,6 +8,7 @@ import sys
 
 import numpy as np
 import pytest
+import yaml
 
 from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
 from helireach_ros.core.envelope.data import (
@@ -30,21 +31,30 @@ _PARAMETERS = (
 )  # fmt: skip
 
 
-def uncertainty(**widened: tuple[float, float]):
+def uncertainty_document(**widened: tuple[float, float]) -> dict:
     """An uncertainty set with every range of zero width (the exact model, 0.05 s latency) but ``widened`` (%)."""
     parameters = {
         name: {"low": widened.get(name, (0, 0))[0], "high": widened.get(name, (0, 0))[1], "unit": "%", "note": "test"}
         for name in _PARAMETERS
     }
-    return parse_uncertainty_set(
-        {
-            "name": "test",
-            "parameters": parameters,
-            "density_altitude": {"low": 0, "high": 0, "unit": "ft", "note": "test"},
-            "plan_latency": {"low": 0.05, "high": 0.05, "unit": "s", "note": "test"},
-            "sensor_noise": {sensor: {"value": 0, "unit": unit, "note": "test"} for sensor, unit in _SENSORS},
-        }
-    )
+    return {
+        "name": "test",
+        "parameters": parameters,
+        "density_altitude": {"low": 0, "high": 0, "unit": "ft", "note": "test"},
+        "plan_latency": {"low": 0.05, "high": 0.05, "unit": "s", "note": "test"},
+        "sensor_noise": {sensor: {"value": 0, "unit": unit, "note": "test"} for sensor, unit in _SENSORS},
+    }
+
+
+def uncertainty(**widened: tuple[float, float]):
+    """:func:`uncertainty_document`, parsed."""
+    return parse_uncertainty_set(uncertainty_document(**widened))
+
+
+def uncertainty_file(path, **widened: tuple[float, float]) -> str:
+    """:func:`uncertainty_document` as a YAML file (for the command line and node parameters); its path."""
+    path.write_text(yaml.safe_dump(uncertainty_document(**widened)))
+    return str(path)
 
 
 @pytest.fixture(scope="module")
@@ -144,23 +154,12 @@ def test_the_diagram_draws_the_robust_boundary(nominal, exact_model, tmp_path) -
 
 def test_the_cli_adds_robust_verdicts_to_a_file_and_queries_them(exact_model, nominal, tmp_path) -> None:
     source = save_envelope(nominal, tmp_path / "nominal.npz")
-    set_file = tmp_path / "heavy.yaml"
-    set_file.write_text(
-        "name: heavy\nparameters:\n"
-        + "".join(
-            f"  {name}: {{low: {20 if name == 'gross_weight' else 0}, high: {25 if name == 'gross_weight' else 0}, "
-            f'unit: "%", note: test}}\n'
-            for name in _PARAMETERS
-        )
-        + "density_altitude: {low: 0, high: 0, unit: ft, note: test}\n"
-        + "plan_latency: {low: 0.05, high: 0.05, unit: s, note: test}\nsensor_noise:\n"
-        + "".join(f"  {sensor}: {{value: 0, unit: {unit}, note: test}}\n" for sensor, unit in _SENSORS)
-    )
+    set_file = uncertainty_file(tmp_path / "heavy.yaml", gross_weight=(20, 25))
     out = tmp_path / "robust.npz"
     helireach = [sys.executable, "-m", "helireach_ros.cli"]
     done = subprocess.run(
         [*helireach, "envelope", "robust", str(source), "--out", str(out), "--workers", "1", "--quiet",
-         "--uncertainty", str(set_file)],
+         "--uncertainty", set_file],
         capture_output=True, text=True, timeout=600,
     )  # fmt: skip
     assert done.returncode == 0, done.stderr

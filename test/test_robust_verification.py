@@ -16,7 +16,13 @@ import pytest
 from helireach_ros.core.background_verification import BackgroundRobustVerification
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import get_planner
-from helireach_ros.core.robust_verification import failure_state, model_vehicle, verify_plan_robust, verify_robust
+from helireach_ros.core.robust_verification import (
+    failure_state,
+    model_vehicle,
+    own_landing,
+    verify_plan_robust,
+    verify_robust,
+)
 from helireach_ros.core.simulation import Scenario, SimulatedVehicle
 from helireach_ros.core.uncertainty import PerturbedModel, UncertainRange, load_uncertainty_set
 from helireach_ros.core.units import FT, KT
@@ -133,10 +139,7 @@ def test_the_default_sets_heavy_light_rotor_corners_have_no_landing_of_their_own
     values = []
     for corner in uncertainty.verification_design():
         if corner.mismatch["gross_weight"] > 0 and corner.mismatch["rotor_inertia"] < 0:
-            true_airframe = corner.airframe(airframe)
-            own = get_planner(true_airframe, settings).plan(
-                initial_state_after_failure(true_airframe, 500 * FT, 75 * KT)
-            )
+            own = own_landing(corner, airframe, settings, 500 * FT, 75 * KT)
             assert own.solver.success
             values.append(own.value)
     assert len(values) == 4

@@ -10,30 +10,13 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.context import Context
 from rclpy.parameter import Parameter
-from test_robust_envelope import _PARAMETERS, _SENSORS
+from test_robust_envelope import uncertainty_file
 from test_ros_nodes import planner_harness, trigger_failure
 
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 
 _VERDICT_TIMEOUT_S = 120.0  # a niced worker on a busy 2-core machine: the closed loops take seconds each
-
-
-def _uncertainty_file(path, weight: tuple[int, int]) -> str:
-    lines = ["name: test", "parameters:"]
-    lines += [
-        f"  {name}: {{low: {weight[0] if name == 'gross_weight' else 0}, high: "
-        f'{weight[1] if name == "gross_weight" else 0}, unit: "%", note: test}}'
-        for name in _PARAMETERS
-    ]
-    lines += [
-        "density_altitude: {low: 0, high: 0, unit: ft, note: test}",
-        "plan_latency: {low: 0.05, high: 0.05, unit: s, note: test}",
-        "sensor_noise:",
-        *(f"  {sensor}: {{value: 0, unit: {unit}, note: test}}" for sensor, unit in _SENSORS),
-    ]
-    path.write_text("\n".join(lines) + "\n")
-    return str(path)
 
 
 @pytest.mark.parametrize(
@@ -48,7 +31,7 @@ def test_the_failure_plan_is_published_pending_and_its_robust_verdict_follows(
     harness, planner = planner_harness(
         context,
         Parameter("robust_verification", value=True),
-        Parameter("robust_uncertainty", value=_uncertainty_file(tmp_path / "set.yaml", weight)),
+        Parameter("robust_uncertainty", value=uncertainty_file(tmp_path / "set.yaml", gross_weight=weight)),
         Parameter("replan_period", value=replan_period),
     )
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)

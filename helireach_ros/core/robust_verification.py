@@ -52,6 +52,7 @@ __all__ = [
     "failure_state",
     "fly_open_loop",
     "model_vehicle",
+    "own_landing",
     "scenario_at",
     "verify_plan_robust",
     "verify_robust",
@@ -170,6 +171,25 @@ def model_vehicle(
     if start is None:
         return SimulatedVehicle(perturbed, model.conditions(airframe), settings)
     return SimulatedVehicle(perturbed, model.conditions(airframe), settings, start.initial_state, start.initial_control)
+
+
+def own_landing(
+    model: PerturbedModel,
+    airframe: Airframe,
+    settings: PlannerSettings,
+    height: float,
+    speed: float,
+    power_fraction: float = 0.0,
+) -> LandingPlan:
+    """The landing a planner that *knows* the perturbed model plans for it, cold, after a failure from level trim at
+    (height m, speed m/s): whether the model can land at all. A model without a safe landing of its own cannot be
+    landed within limits by any re-planning policy of this NLP (up to IPOPT's local optimum), so a robust verdict
+    that includes it is out of reach whatever the policy."""
+    from helireach_ros.core.planner import get_planner
+
+    true_airframe = model.airframe(airframe)
+    state = initial_state_after_failure(true_airframe, height, speed, power_fraction)
+    return get_planner(true_airframe, settings).plan(state)
 
 
 def scenario_at(plan: LandingPlan, noise: SensorNoise | None = None, seed: int = 0) -> Scenario:

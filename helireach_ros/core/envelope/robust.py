@@ -112,9 +112,8 @@ def verify_node(
     The nominal plan is re-solved from the stored one (warm start) so the flights start from the planner's
     own plan; if that plan is not safe the node is ``nominal_not_safe`` without a flight.
     """
-    from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import get_planner
-    from helireach_ros.core.robust_verification import failure_state, verify_robust
+    from helireach_ros.core.robust_verification import failure_state, own_landing, verify_robust
     from helireach_ros.core.simulation import Scenario
 
     started = time.perf_counter()
@@ -130,11 +129,7 @@ def verify_node(
     attainable = -1
     if verdict.failing_models:
         failing = next(outcome.model for outcome in verdict.closed_loop if not outcome.within_limits)
-        true_airframe = failing.airframe(job.airframe)
-        own = get_planner(true_airframe, job.settings).plan(
-            initial_state_after_failure(true_airframe, height, speed, power_fraction)
-        )
-        attainable = int(own.safe)
+        attainable = int(own_landing(failing, job.airframe, job.settings, height, speed, power_fraction).safe)
     return NodeRobustness(
         failure_attainable=attainable,
         code=ROBUST_CODES["robust" if verdict.robust else "not_robust"],
