@@ -95,8 +95,8 @@ def summarise_verification(
         design=design,
         design_size=verdict.design_size,
         models_flown=len(verdict.closed_loop),
-        closed_loop_landed=sum(outcome.within_limits for outcome in verdict.closed_loop),
-        open_loop_landed=sum(outcome.within_limits for outcome in verdict.open_loop),
+        closed_loop_landed=verdict.closed_loop_landed,
+        open_loop_landed=verdict.open_loop_landed,
         seconds=time.perf_counter() - started,
     )
 

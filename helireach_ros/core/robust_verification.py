@@ -116,6 +116,21 @@ class RobustVerdict:
         return len(self.closed_loop) < self.design_size
 
     @property
+    def closed_loop_landed(self) -> int:
+        """Closed-loop flights that landed within the true limits."""
+        return sum(outcome.within_limits for outcome in self.closed_loop)
+
+    @property
+    def open_loop_landed(self) -> int:
+        """Open-loop flights that landed within the true limits (reported, not part of the verdict)."""
+        return sum(outcome.within_limits for outcome in self.open_loop)
+
+    @property
+    def first_failure(self) -> ModelOutcome | None:
+        """The first closed-loop flight that did not land within limits (None: none failed)."""
+        return next((outcome for outcome in self.closed_loop if not outcome.within_limits), None)
+
+    @property
     def failing_models(self) -> tuple[str, ...]:
         """Labels of the models whose closed loop did not land within limits."""
         return tuple(outcome.model.label for outcome in self.closed_loop if not outcome.within_limits)
@@ -129,7 +144,7 @@ class RobustVerdict:
             return f"the plan is {self.nominal_status} in the nominal model"
         if not self.closed_loop:
             return "no perturbed model was flown"
-        first = next(outcome for outcome in self.closed_loop if not outcome.within_limits)
+        first = self.first_failure
         flown = (
             f"{len(self.closed_loop)}"
             if not self.stopped_early

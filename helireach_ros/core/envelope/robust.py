@@ -100,7 +100,6 @@ class NodeRobustness:
     open_loop_landed: int
     seconds: float
     plans: int
-    failing_model: str = ""
     failure_attainable: int = -1
 
 
@@ -126,19 +125,18 @@ def verify_node(
         scenario, planner, job.models(), job.policy, plan=plan, design=job.design(),
         stop_at_first_failure=job.stop_at_first_failure,
     )  # fmt: skip
+    failure = verdict.first_failure
     attainable = -1
-    if verdict.failing_models:
-        failing = next(outcome.model for outcome in verdict.closed_loop if not outcome.within_limits)
-        attainable = int(own_landing(failing, job.airframe, job.settings, height, speed, power_fraction).safe)
+    if failure is not None:
+        attainable = int(own_landing(failure.model, job.airframe, job.settings, height, speed, power_fraction).safe)
     return NodeRobustness(
-        failure_attainable=attainable,
         code=ROBUST_CODES["robust" if verdict.robust else "not_robust"],
         models_flown=len(verdict.closed_loop),
-        closed_loop_landed=sum(outcome.within_limits for outcome in verdict.closed_loop),
-        open_loop_landed=sum(outcome.within_limits for outcome in verdict.open_loop),
+        closed_loop_landed=verdict.closed_loop_landed,
+        open_loop_landed=verdict.open_loop_landed,
         seconds=time.perf_counter() - started,
         plans=1 + sum(outcome.plans + outcome.failed_plans for outcome in verdict.closed_loop),
-        failing_model=verdict.failing_models[0] if verdict.failing_models else "",
+        failure_attainable=attainable,
     )
 
 
