@@ -10,15 +10,22 @@ import os
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.settings import PlannerSettings
 
-__all__ = ["BEFORE_ISSUE_13", "baseline_codegen", "baseline_settings", "loadavg_text"]
+__all__ = ["BEFORE_ISSUE_13", "baseline_codegen", "baseline_settings", "loadavg_text", "six_state_settings"]
 
-BEFORE_ISSUE_13 = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2}
-"""The warm-solver options before issue 13 (``bound_push``/``bound_frac`` were IPOPT's defaults)."""
+BEFORE_ISSUE_13 = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2, "closed_form_states": False}
+"""The warm-solver options before issue 13 (``bound_push``/``bound_frac`` were IPOPT's defaults) and its NLP,
+all six states as variables."""
 
 
 def baseline_settings(settings: PlannerSettings) -> PlannerSettings:
-    """``settings`` with the warm-solver options before issue 13."""
+    """``settings`` with the warm-solver options and the NLP before issue 13."""
     return settings.replace(**BEFORE_ISSUE_13)
+
+
+def six_state_settings(settings: PlannerSettings) -> PlannerSettings:
+    """``settings`` with all six states as NLP variables (``closed_form_states`` off): issue 13's NLP before
+    distance and engine power went into closed form."""
+    return settings.replace(closed_form_states=False)
 
 
 def baseline_codegen() -> CodegenSettings:

@@ -13,7 +13,8 @@ drag mismatch and noise), each warm from the plan being flown. Times are IPOPT w
 replay, which follows every solve, is timed separately. Prints what it measured on this machine and the load average.
 
 ``--baseline`` also runs the configuration before issue 13 (IPOPT's warm-solver options of then,
-plain CasADi functions) and the warm options alone, on the same states and the same warm starts,
+plain CasADi functions), the warm options alone and (verified, flyable) the six-state NLP, distance and engine
+power as NLP variables (``closed_form_states`` off), on the same states and the same warm starts,
 interleaved state by state so that load changes hit every configuration alike, and prints each
 configuration's total solve time as a ratio to the baseline's (the comparison that holds on a busy
 machine). The compiled functions are used only if the cache holds them (``make nlp-cache``).
@@ -29,13 +30,13 @@ import sys
 import time
 
 import numpy as np
-from baseline_config import baseline_codegen, baseline_settings, loadavg_text
+from baseline_config import baseline_codegen, baseline_settings, loadavg_text, six_state_settings
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner
+from helireach_ros.core.planner import LandingPlanner, WarmStart
 from helireach_ros.core.settings import PlannerSettings, load_settings
 from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
 from helireach_ros.core.units import FT, KT
@@ -67,7 +68,15 @@ def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str
     if not baseline:
         return [current]
     before, plain = baseline_settings(settings), baseline_codegen()
-    return [("before issue 13", before, plain), ("warm options, plain functions", settings, plain), current]
+    if settings.method == "paper":  # its NLP has no closed-form states
+        return [("before issue 13", before, plain), ("warm options, plain functions", settings, plain), current]
+    six_states = six_state_settings(settings)
+    return [
+        ("before issue 13", before, plain),
+        ("warm options, six states, plain functions", six_states, plain),
+        ("six states, compiled", six_states, current[2]),
+        current,
+    ]
 
 
 def _run_method(airframe, method: str, points, baseline: bool) -> None:
@@ -79,27 +88,27 @@ def _run_method(airframe, method: str, points, baseline: bool) -> None:
         print(f"\nmethod {method}, {name}: NLP built in {planner.build_time_s:.2f} s on {planner.nlp_functions}")
     samples = [{"cold": [], "near": [], "far": [], "replay": [], "iterations": [], "statuses": {}} for _ in planners]
     disagreements, value_gap = 0, 0.0
-    previous = None
+    previous = [None] * len(planners)
     for height_ft, speed_kt in points:
         state = initial_state_after_failure(airframe, height_ft * FT, speed_kt * KT)
         nearby = initial_state_after_failure(airframe, (height_ft + 10.0) * FT, (speed_kt + 2.5) * KT)
-        reference = planners[-1].plan(state)  # every configuration warm-starts from the same plans
         near_plans = []
-        for planner, sample in zip(planners, samples, strict=True):
+        for index, (planner, sample) in enumerate(zip(planners, samples, strict=True)):
+            # each configuration warm-starts from its own cold plan of the same state (the NLPs' layouts differ)
             started = time.perf_counter()
             cold_plan = planner.plan(state)
             sample["replay"].append(1e3 * (time.perf_counter() - started) - cold_plan.solver.solve_time_ms)
             sample["cold"].append(cold_plan.solver.solve_time_ms)
             sample["statuses"][cold_plan.status] = sample["statuses"].get(cold_plan.status, 0) + 1
-            near = planner.plan(nearby, warm_start=reference.warm_start)
+            near = planner.plan(nearby, warm_start=cold_plan.warm_start)
             near_plans.append(near)
             sample["near"].append(near.solver.solve_time_ms)
             sample["iterations"].append(near.solver.iterations)
-            if previous is not None:
-                sample["far"].append(planner.plan(state, warm_start=previous.warm_start).solver.solve_time_ms)
+            if previous[index] is not None:
+                sample["far"].append(planner.plan(state, warm_start=previous[index].warm_start).solver.solve_time_ms)
+            previous[index] = cold_plan
         disagreements += len({plan.status for plan in near_plans}) > 1
         value_gap = max(value_gap, max(abs(plan.value - near_plans[0].value) for plan in near_plans))
-        previous = reference
     for (name, _, _), sample in zip(configurations, samples, strict=True):
         print(f"\nmethod {method}, {name}: cold statuses {sample['statuses']}")
         print(f"  cold solve        {_percentiles(sample['cold'])}")
@@ -143,13 +152,37 @@ class _RecordingPlanner:
         return self.planner.plan(state, warm_start, initial_control, reaction_delay_s, disturbance=disturbance)
 
 
+def _state_rows(planner: LandingPlanner) -> tuple[int, ...]:
+    return planner.transcription.state_rows
+
+
+def _warm_start_for(planner: LandingPlanner, recorded_on: LandingPlanner, warm_start: WarmStart) -> WarmStart:
+    """A warm start of ``recorded_on``'s NLP in ``planner``'s layout: a six-state solution reduces to the
+    closed-form layout by dropping z, P and their collocation equations (their multipliers belong to them)."""
+    rows, recorded_rows = _state_rows(planner), _state_rows(recorded_on)
+    if rows == recorded_rows:
+        return warm_start
+    points, head = planner.transcription.n_states, 2 + 2 * planner.settings.intervals
+    kept = [point * len(recorded_rows) + recorded_rows.index(row) for point in range(points) for row in rows]
+    primal_index = np.concatenate([np.arange(head), head + np.asarray(kept)])
+    residual_rows = points * len(recorded_rows)
+    constraint_index = np.concatenate([kept, np.arange(residual_rows, warm_start.constraint_multipliers.size)])
+    return WarmStart(
+        warm_start.primal[primal_index],
+        warm_start.bound_multipliers[primal_index],
+        warm_start.constraint_multipliers[constraint_index],
+    )
+
+
 def _run_replans(airframe, method: str, baseline: bool) -> None:
     """Re-plans as the planner node makes them: along closed-loop descents of the demo scenario (5 % drag
     mismatch, sensor noise, re-planning every 0.25 s from the control being flown, warm from the current plan),
     recorded once and then timed for each configuration, interleaved re-plan by re-plan."""
     configurations = _configurations(load_settings(method=method), baseline)
     planners = [LandingPlanner(airframe, settings, codegen) for _, settings, codegen in configurations]
-    recorder = _RecordingPlanner(planners[-1])
+    # recorded on the six-state NLP when one is compared: its warm starts reduce exactly to the closed-form layout
+    six_state = [planner for planner in planners if len(_state_rows(planner)) == 6]
+    recorder = _RecordingPlanner(six_state[-1] if baseline and six_state else planners[-1])
     scenario = load_scenario("demo_500ft_75kt")
     landed = 0
     for height_ft, speed_kt in _REPLAN_STARTS:
@@ -161,7 +194,8 @@ def _run_replans(airframe, method: str, baseline: bool) -> None:
     for index, (state, warm_start, control, disturbance) in enumerate(recorder.replans):
         order = list(range(len(planners)))
         for which in order if index % 2 == 0 else order[::-1]:
-            plan = planners[which].plan(state, warm_start, control, 0.0, disturbance=disturbance)
+            start = _warm_start_for(planners[which], recorder.planner, warm_start)
+            plan = planners[which].plan(state, start, control, 0.0, disturbance=disturbance)
             samples[which].append((plan.solver.solve_time_ms, plan.solver.iterations, plan.solver.success))
             statuses[which][plan.status] = statuses[which].get(plan.status, 0) + 1
     print(

@@ -34,12 +34,14 @@ def test_a_power_no_plausible_weight_explains_is_refused(airframe) -> None:
 
 def test_the_closed_loop_with_an_unknown_5_percent_weight_lands_when_it_estimates_the_weight(airframe, settings):
     """+5 % weight the airframe file does not know: with the file's weight the closed loop lands outside the limits
-    (test_closed_loop); estimating the weight from the power before the failure, it lands within them."""
+    (test_closed_loop, re-planning without the disturbance estimate); estimating the weight from the power before
+    the failure, the same policy lands within them. (With the disturbance estimate on as well the landing is at
+    the speed limit, 5.7–6.3 kt for latencies 0.05–0.15 s with either NLP: a knife edge, see the README.)"""
     heavy = dataclasses.replace(load_scenario("demo_500ft_75kt"), parameter_mismatch={"gross_weight": 0.05})
     result = fly_closed_loop(
         SimulatedVehicle(heavy, airframe, settings),
         get_planner(airframe, settings),
-        ClosedLoopSettings(latency=0.1, estimate_weight=True),
+        ClosedLoopSettings(latency=0.1, estimate_weight=True, estimate_disturbance=False),
     )
     assert result.planned_gross_weight / airframe.gross_weight - 1.0 == pytest.approx(0.05, abs=0.005)
     assert result.touchdown.within_limits, result.touchdown.reason

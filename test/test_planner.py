@@ -1,5 +1,6 @@
 """Landing plans with real IPOPT and the independent replay: the acceptance cases of the core."""
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -167,3 +168,53 @@ def test_warm_solver_options_are_validated():
         PlannerSettings(warm_start_bound_push=0.0)
     with pytest.raises(ConfigError, match="warm_bound_push"):
         PlannerSettings(warm_bound_push=float("nan"))
+
+
+def _six_state_vector(planner, plan) -> np.ndarray:
+    """A closed-form plan as a point of the six-state NLP: its decision head and all six states, scaled."""
+    transcription = planner.transcription
+    head = plan.warm_start.primal[: 2 + 2 * planner.settings.intervals]
+    states = plan.states[:, 1:] / transcription.state_scale[:, None]
+    return np.concatenate([head, states.reshape(-1, order="F")])
+
+
+@pytest.mark.parametrize("method", ["flyable", "verified"])
+def test_closed_form_states_solve_the_six_state_nlp(uh60, method):
+    """Issue 13: distance and engine power in closed form (``closed_form_states``, the default).
+
+    The closed-form plan, with its z and P put back as variables, satisfies every equation and bound of the
+    six-state NLP (the z and P collocation equations exactly), and both NLPs give the same statuses from cold
+    starts, with the engine dead and with 30 % of its power left (P ≠ 0 decays). Values agree to 5e-3: the
+    NLP is not convex, and along the flat optimum of the smoothness term the two may end in different local
+    optima (measured: 1.4e-3 apart at 300 ft / 60 kt with power left, else ≤ 1e-6).
+    """
+    closed = get_planner(uh60, PlannerSettings(method=method))
+    six = get_planner(uh60, PlannerSettings(method=method, closed_form_states=False))
+    assert closed.transcription.state_rows == (0, 1, 2, 3) and len(six.transcription.state_rows) == 6
+    assert six.transcription.lbx.size - closed.transcription.lbx.size == 2 * six.transcription.n_states
+    six_nlp = six.transcription
+    constraints = ca.Function("g", [six_nlp.decision, six_nlp.parameters], [six_nlp.constraints])
+    statuses = set()
+    for height_ft, speed_kt, power_fraction in ((500, 75, 0.0), (150, 0, 0.0), (700, 20, 0.0), (300, 60, 0.3)):
+        state = initial_state_after_failure(uh60, height_ft * FT, speed_kt * KT, power_fraction=power_fraction)
+        plan, reference = closed.plan(state), six.plan(state)
+        assert plan.solver.success and reference.solver.success
+        assert plan.status == reference.status, (height_ft, speed_kt)
+        assert plan.value == pytest.approx(reference.value, abs=5e-3), (height_ft, speed_kt)
+        statuses.add(plan.status)
+
+        point = _six_state_vector(six, plan)
+        parameter = np.concatenate([plan.initial_state, plan.initial_control, plan.disturbance])
+        residuals = np.asarray(constraints(point, parameter)).reshape(-1)
+        closed_form_rows = np.arange(six_nlp.n_states)[:, None] * 6 + np.array([4, 5])
+        assert np.abs(residuals[closed_form_rows]).max() < 1e-9  # z and P: their collocation solutions
+        assert np.all(residuals >= six_nlp.lbg - 1e-6) and np.all(residuals <= six_nlp.ubg + 1e-6)
+        assert np.all(point >= six_nlp.lbx - 1e-6) and np.all(point <= six_nlp.ubx + 1e-6)
+        if power_fraction:
+            assert plan.states[5, 0] > 0.0 and np.all(np.diff(plan.states[5]) < 0.0)  # the power left decays
+    assert statuses == {"safe", "unsafe"}
+
+
+def test_closed_form_states_setting_is_validated():
+    with pytest.raises(ConfigError, match="closed_form_states"):
+        PlannerSettings(closed_form_states=1)

@@ -55,6 +55,12 @@ class PlannerSettings:
         reaction_delay_s: s after the failure during which the controls stay at their pre-failure values
             (the pilot's or the automation's reaction time) before the plan takes over; the plan carries this
             segment and the replay flies it. 0 = the plan starts at the failure.
+        closed_form_states: verified and flyable: the distance z and the engine power P are not decision
+            variables but their collocation solutions in closed form (z the quadrature of v, P the solution
+            of Ṗ = −P/τ), which satisfy their collocation equations exactly; neither feeds back into the
+            other states except P into Ω̇. The NLP has 4 instead of 6 states per point (282 instead of 402
+            variables for the flyable default) and no degenerate P ≥ 0 bound when P = 0. False: the NLP with all
+            six (as before, for comparisons).
     """
 
     method: str = "flyable"
@@ -75,6 +81,7 @@ class PlannerSettings:
     rotor_speed_backoff: float = 0.01
     rotor_speed_replay_margin: float = 0.0
     reaction_delay_s: float = 0.0
+    closed_form_states: bool = True
 
     def __post_init__(self) -> None:
         problems = []
@@ -107,6 +114,8 @@ class PlannerSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
                 problems.append(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}")
+        if not isinstance(self.closed_form_states, bool):
+            problems.append(f"closed_form_states must be true or false, got {self.closed_form_states!r}")
         if not problems and self.min_time_to_land >= self.max_time_to_land:
             problems.append("min_time_to_land must be below max_time_to_land")
         if problems:

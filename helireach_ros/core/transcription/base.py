@@ -167,11 +167,12 @@ class Transcription(ABC):
         differences = controls_scaled[:, 1:] - controls_scaled[:, :-1]
         return ca.sumsqr(differences)
 
-    def scaled_state_bounds(self, count: int) -> tuple[np.ndarray, np.ndarray]:
-        """Bounds of ``count`` consecutive scaled states (column-major, 6 per state)."""
+    def scaled_state_bounds(self, count: int, rows: tuple[int, ...] = tuple(range(6))) -> tuple[np.ndarray, np.ndarray]:
+        """Bounds of ``count`` consecutive scaled states (column-major, ``rows`` of the six per state)."""
+        rows_index = list(rows)
         return (
-            np.tile(self.state_lower / self.state_scale, count),
-            np.tile(self.state_upper / self.state_scale, count),
+            np.tile(self.state_lower[rows_index] / self.state_scale[rows_index], count),
+            np.tile(self.state_upper[rows_index] / self.state_scale[rows_index], count),
         )
 
     def scaled_control_bounds(self, count: int) -> tuple[np.ndarray, np.ndarray]:

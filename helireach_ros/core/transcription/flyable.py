@@ -69,15 +69,15 @@ class FlyableTranscription(VerifiedTranscription):
         # u_0 is the parameter's; the decision holds u_1 … u_K
         self.control_lower = np.array([0.0, -flyability.max_nose_up_pitch])
         self.control_upper = np.array([airframe.max_thrust_coefficient, flyability.max_nose_down_pitch])
-        decision = ca.SX.sym("w", 2 + 2 * intervals + 6 * self.n_states)
+        decision = ca.SX.sym("w", 2 + 2 * intervals + len(self.state_rows) * self.n_states)
         self.decision = decision
         time_scaled, slack = decision[0], decision[1]
         control_scale = ca.DM(self.control_scale)
         decided = ca.reshape(decision[2 : 2 + 2 * intervals], 2, intervals)
-        states = ca.reshape(decision[2 + 2 * intervals :], 6, self.n_states)
+        states = ca.reshape(decision[2 + 2 * intervals :], len(self.state_rows), self.n_states)
         landing_time = time_scaled * _TIME_SCALE
 
-        physical_states = states * ca.repmat(ca.DM(self.state_scale), 1, self.n_states)
+        physical_states = self.point_states(states, landing_time, self.initial_state)
         breakpoints = ca.horzcat(self.initial_control, decided * ca.repmat(control_scale, 1, intervals))
         control_at_point = ca.horzcat(
             *[
@@ -123,19 +123,18 @@ class FlyableTranscription(VerifiedTranscription):
             ca.reshape(commit, -1, 1),
             ca.reshape(rotor_margin, -1, 1),
         )
-        n_equalities = 6 * self.n_states
+        n_equalities = residuals.numel()
         n_rates = 4 * intervals
-        self.lbg = np.concatenate(
-            [np.zeros(n_equalities), np.full(6 + n_rates, -np.inf), np.zeros(2 * self.n_states)]
-        )
+        self.lbg = np.concatenate([np.zeros(n_equalities), np.full(6 + n_rates, -np.inf), np.zeros(2 * self.n_states)])
         self.ubg = np.concatenate([np.zeros(n_equalities + 6 + n_rates), np.full(2 * self.n_states, np.inf)])
 
         self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit (and back-off) is the constraint
-        state_low, state_high = self.scaled_state_bounds(self.n_states)
-        state_low[-3] = state_high[-3] = 0.0  # h(T) = 0: the plan ends on the ground
+        state_low, state_high = self.scaled_state_bounds(self.n_states, self.state_rows)
+        touchdown_height = self.state_index(self.n_states - 1, 3)
+        state_low[touchdown_height] = state_high[touchdown_height] = 0.0  # h(T) = 0: the plan ends on the ground
         # The upper rotor back-off starts after the first interval, as the lower one ramps in: a re-plan from a
         # rotor between the NLP's line and the true limit (a flare speeds it up) must bring it inside, and may.
-        first_interval = slice(2, 6 * settings.degree, 6)  # Ω at interval 1's collocation points
+        first_interval = [self.state_index(point, 2) for point in range(settings.degree)]  # Ω in interval 1
         state_high[first_interval] = airframe.limits.max_rotor_speed_ratio * omega0 / self.state_scale[2]
         control_low, control_high = self.scaled_control_bounds(intervals)
         # θ(T) inside the window by a margin: the replay's contact can come a little before T, where θ is on
@@ -154,6 +153,6 @@ class FlyableTranscription(VerifiedTranscription):
         landing_time = float(solution[0]) * _TIME_SCALE
         decided = solution[2 : 2 + 2 * intervals].reshape(2, intervals, order="F") * self.control_scale[:, None]
         controls = np.column_stack([np.asarray(initial_state, dtype=float)[6:8], decided])
-        states = solution[2 + 2 * intervals :].reshape(6, self.n_states, order="F") * self.state_scale[:, None]
+        states = self.decoded_states(solution, landing_time, initial_state)
         control_times = np.concatenate([self.interval_starts, [1.0]]) * landing_time
         return self.decoded_plan(landing_time, initial_state, states, control_times, controls, "linear")

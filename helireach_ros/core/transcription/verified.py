@@ -11,6 +11,16 @@ control is constant (what the replay integrates exactly), and
 with :math:`C_{ij} = L_j'(\\tau_i)` on [0, 1]. Minimising J(x(T)) over T is the BRT value of the
 paper's time-freeze formulation (freezing after touchdown is the same as stopping at T).
 Ground and rotor-speed limits hold at every collocation point (simple variable bounds).
+
+**Closed-form states** (``closed_form_states``, the default). The distance z and the engine power P feed
+nothing but Ω̇ (P), and their ODEs are linear: ż = v, Ṗ = −P/τ. Their collocation equations are then solved
+in closed form, per interval with :math:`C = [c_0 \\; C_1]`,
+
+.. math:: z_k = C_1^{-1} (h_k v_k - c_0 z_{k,0}), \\qquad P_k = -(C_1 + \\tfrac{h_k}{\\tau} I)^{-1} c_0 P_{k,0},
+
+(the stage values of interval k), so only (y, v, Ω, h) are decision variables. The solution is the one the
+six-state NLP has (its z and P equations hold exactly), with a third fewer variables and equations, and
+without the six-state NLP's degenerate P ≥ 0 bound when the engine has no power left (P ≡ 0).
 """
 
 from __future__ import annotations
@@ -24,6 +34,7 @@ from helireach_ros.core.transcription.base import DecodedPlan, Transcription
 __all__ = ["VerifiedTranscription", "interval_fractions"]
 
 _TIME_SCALE = 10.0  # s; T is optimised as T / 10
+_DECIDED_ROWS = (0, 1, 2, 3)  # y, v, Ω, h: the decision states when z and P are in closed form
 _CURVE_SAMPLES = 8  # polynomial samples per interval for figures
 
 
@@ -42,14 +53,14 @@ class VerifiedTranscription(Transcription):
         settings = self.settings
         intervals, degree = settings.intervals, settings.degree
         self._build_mesh()
-        decision = ca.SX.sym("w", 2 + 2 * intervals + 6 * self.n_states)
+        decision = ca.SX.sym("w", 2 + 2 * intervals + len(self.state_rows) * self.n_states)
         self.decision = decision
         time_scaled, slack = decision[0], decision[1]
         controls = ca.reshape(decision[2 : 2 + 2 * intervals], 2, intervals)
-        states = ca.reshape(decision[2 + 2 * intervals :], 6, self.n_states)
+        states = ca.reshape(decision[2 + 2 * intervals :], len(self.state_rows), self.n_states)
         landing_time = time_scaled * _TIME_SCALE
 
-        physical_states = states * ca.repmat(ca.DM(self.state_scale), 1, self.n_states)
+        physical_states = self.point_states(states, landing_time, self.initial_state)
         physical_controls = controls * ca.repmat(ca.DM(self.control_scale), 1, intervals)
         control_at_point = ca.repmat(physical_controls, degree, 1)
         control_at_point = ca.reshape(control_at_point, 2, self.n_states)
@@ -58,11 +69,11 @@ class VerifiedTranscription(Transcription):
 
         self.objective = slack + settings.smoothness_weight * self.smoothness(controls)
         self.constraints = ca.vertcat(residuals, self.epigraph(slack, terminal_scaled))
-        n_equalities = 6 * self.n_states
+        n_equalities = residuals.numel()
         self.lbg = np.concatenate([np.zeros(n_equalities), np.full(6, -np.inf)])
         self.ubg = np.zeros(n_equalities + 6)
 
-        state_low, state_high = self.scaled_state_bounds(self.n_states)
+        state_low, state_high = self.scaled_state_bounds(self.n_states, self.state_rows)
         control_low, control_high = self.scaled_control_bounds(intervals)
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
         self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
@@ -78,9 +89,52 @@ class VerifiedTranscription(Transcription):
         self.curve_points = np.linspace(0.0, 1.0, _CURVE_SAMPLES + 1)[1:]
         self.curve_basis = lagrange_basis_values(support, self.curve_points)
         self.n_states = settings.intervals * settings.degree
+        self.state_rows = _DECIDED_ROWS if settings.closed_form_states else tuple(range(6))
+        self.closed_form = self._closed_form_function()
+
+    def _closed_form_function(self) -> ca.Function:
+        """(T, x₀, v at the points) → (z, P at the points): their collocation solutions (module docstring)."""
+        degree = self.settings.degree
+        start_column = ca.DM(self.collocation_matrix[:, 0])
+        stage_matrix = self.collocation_matrix[:, 1:]
+        landing_time, initial = ca.SX.sym("T"), ca.SX.sym("x0", 6)
+        speeds = ca.SX.sym("v", 1, self.n_states)
+        distance_start, power_start = initial[4], initial[5]
+        distances, powers = [], []
+        for k in range(self.settings.intervals):
+            step = landing_time * float(self.fractions[k])
+            stage_speeds = speeds[0, k * degree : (k + 1) * degree].T
+            distance = ca.DM(np.linalg.inv(stage_matrix)) @ (step * stage_speeds - start_column * distance_start)
+            decay = ca.DM(stage_matrix) + step / self.airframe.engine_time_constant * ca.DM.eye(degree)
+            power = ca.solve(decay, -start_column * power_start)
+            distances.append(distance.T)
+            powers.append(power.T)
+            distance_start, power_start = distance[-1], power[-1]
+        return ca.Function(
+            "closed_form_states", [landing_time, initial, speeds], [ca.horzcat(*distances), ca.horzcat(*powers)]
+        )
+
+    def point_states(self, decided, landing_time, initial):
+        """The six physical states at the points from the decided ones (scaled, ``state_rows`` of them) and the
+        initial state: z and P from :attr:`closed_form` when they are not decided. SX in the NLP, numpy when
+        decoding."""
+        rows = list(self.state_rows)
+        symbolic = isinstance(decided, ca.SX)
+        scale = self.state_scale[rows][:, None]
+        physical = decided * ca.repmat(ca.DM(scale), 1, self.n_states) if symbolic else np.asarray(decided) * scale
+        if len(rows) == 6:
+            return physical
+        distance, power = self.closed_form(landing_time, initial, physical[1, :])
+        if symbolic:
+            return ca.vertcat(physical, distance, power)
+        return np.vstack([physical, np.asarray(distance), np.asarray(power)])
+
+    def state_index(self, point: int, row: int) -> int:
+        """Index of state ``row`` at collocation point ``point`` among the decided states."""
+        return point * len(self.state_rows) + self.state_rows.index(row)
 
     def collocation_residuals(self, physical_states, control_at_point, landing_time) -> ca.SX:
-        """The scaled collocation equations (6 per point) for the states and the controls at the points."""
+        """The scaled collocation equations of the decided states (``state_rows``, per point)."""
         degree = self.settings.degree
         state_scale = ca.DM(self.state_scale)
         derivatives = self.dynamics.map(self.n_states)(physical_states, control_at_point, self.disturbance)
@@ -91,7 +145,8 @@ class VerifiedTranscription(Transcription):
             step = landing_time * float(self.fractions[k])
             for i in range(degree):
                 slope = sum(float(self.collocation_matrix[i, j]) * columns[j] for j in range(degree + 1))
-                residuals.append((slope - step * derivatives[:, k * degree + i]) / state_scale)
+                residual = (slope - step * derivatives[:, k * degree + i]) / state_scale
+                residuals.append(residual[list(self.state_rows)])  # closed-form rows hold exactly
             previous_end = columns[-1]
         return ca.vertcat(*residuals)
 
@@ -108,7 +163,7 @@ class VerifiedTranscription(Transcription):
             [
                 [landing_time / _TIME_SCALE, 0.0],
                 (controls / self.control_scale[:, None]).reshape(-1, order="F"),
-                (states / self.state_scale[:, None]).reshape(-1, order="F"),
+                (states / self.state_scale[:, None])[list(self.state_rows)].reshape(-1, order="F"),
             ]
         )
 
@@ -116,9 +171,14 @@ class VerifiedTranscription(Transcription):
         intervals = self.settings.intervals
         landing_time = float(solution[0]) * _TIME_SCALE
         controls = solution[2 : 2 + 2 * intervals].reshape(2, intervals, order="F") * self.control_scale[:, None]
-        states = solution[2 + 2 * intervals :].reshape(6, self.n_states, order="F") * self.state_scale[:, None]
+        states = self.decoded_states(solution, landing_time, initial_state)
         control_times = np.concatenate([self.interval_starts, [1.0]]) * landing_time
         return self.decoded_plan(landing_time, initial_state, states, control_times, controls, "zero_order_hold")
+
+    def decoded_states(self, solution: np.ndarray, landing_time: float, initial_state: np.ndarray) -> np.ndarray:
+        """The six physical states at the points (6 × n) of a solution (its states follow its 2 + 2K controls)."""
+        decided = solution[2 + 2 * self.settings.intervals :].reshape(len(self.state_rows), self.n_states, order="F")
+        return self.point_states(decided, landing_time, np.asarray(initial_state, dtype=float)[:6])
 
     def decoded_plan(
         self,
