@@ -1,19 +1,28 @@
-"""Shared test fixtures: ROS 2 discovery isolation.
+"""Shared test fixtures: ROS 2 discovery isolation, and SIGINT for the processes the tests start.
 
 In-process tests turn discovery off; cross-process tests use LOCALHOST discovery on a domain id
 that no other test of this run uses, spread by process id so that concurrent runs on one machine
 are unlikely to meet (a meeting shows up as foreign messages, never as a silent pass).
+
+A suite started as a background job (``make test &`` in a script) inherits SIGINT ignored, and so would
+every node it starts: a node that ignores SIGINT during its start-up runs on, and the tests that stop
+nodes with SIGINT would hang. The suite's own process therefore takes Python's default SIGINT handler,
+which its children's exec resets to the default action.
 """
 
 from __future__ import annotations
 
 import itertools
 import os
+import signal
 
 import pytest
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.settings import PlannerSettings, load_settings
+
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 _NEXT_DOMAIN = itertools.count()
 _DOMAIN_COUNT = 200  # ids 1..200 are valid for every RMW on Linux
