@@ -14,7 +14,8 @@ replay, which follows every solve, is timed separately. Prints what it measured 
 
 ``--baseline`` also runs the configuration before issue 13 (IPOPT's warm-solver options of then,
 plain CasADi functions), the warm options alone and (verified, flyable) the six-state NLP, distance and engine
-power as NLP variables (``closed_form_states`` off), on the same states and the same warm starts,
+power as NLP variables (``closed_form_states`` off), on the same states (each configuration warm-starts from its
+own cold plan of the same state, since the NLPs' layouts differ; the re-plans from the same recorded warm starts),
 interleaved state by state so that load changes hit every configuration alike, and prints each
 configuration's total solve time as a ratio to the baseline's (the comparison that holds on a busy
 machine). The compiled functions are used only if the cache holds them (``make nlp-cache``).

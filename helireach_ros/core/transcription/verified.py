@@ -90,7 +90,7 @@ class VerifiedTranscription(Transcription):
         self.curve_basis = lagrange_basis_values(support, self.curve_points)
         self.n_states = settings.intervals * settings.degree
         self.state_rows = _DECIDED_ROWS if settings.closed_form_states else tuple(range(6))
-        self.closed_form = self._closed_form_function()
+        self.closed_form = self._closed_form_function() if len(self.state_rows) < 6 else None
 
     def _closed_form_function(self) -> ca.Function:
         """(T, x₀, v at the points) → (z, P at the points): their collocation solutions (module docstring)."""
@@ -116,8 +116,8 @@ class VerifiedTranscription(Transcription):
 
     def point_states(self, decided, landing_time, initial):
         """The six physical states at the points from the decided ones (scaled, ``state_rows`` of them) and the
-        initial state: z and P from :attr:`closed_form` when they are not decided. SX in the NLP, numpy when
-        decoding."""
+        initial state: z and P from :attr:`closed_form` (None when all six are decided). SX in the NLP, numpy
+        when decoding."""
         rows = list(self.state_rows)
         symbolic = isinstance(decided, ca.SX)
         scale = self.state_scale[rows][:, None]
