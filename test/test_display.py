@@ -59,6 +59,7 @@ from helireach_ros.display.sections import (
     episode_section,
     path_section,
     plan_status_section,
+    robust_verdict_section,
     rotor_limits_section,
 )
 from helireach_ros.display.server import DisplayServerError, web_directory
@@ -343,6 +344,7 @@ class VehicleAndStatus(Node):
         self.plan_status_publisher = self.create_publisher(DiagnosticStatus, "/helireach/plan_status", LATCHED)
         self.episode_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.LATCHED_QOS)
         self.touchdown_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_TOUCHDOWN, LATCHED)
+        self.robust_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT, LATCHED)
         self.create_timer(1.0 / 60.0, self._publish_vehicle)
         self.create_timer(0.1, self._publish_status)
 
@@ -442,7 +444,7 @@ def real_plan() -> Any:
 def plan_messages(plan: Any, start: TimeMsg) -> tuple[JointTrajectory, PathMsg, DiagnosticStatus]:
     """The trajectory, predicted path and plan status for ``plan`` as the planner node publishes them."""
     stamp_ns = rm.stamp_nanoseconds(start)
-    values = {**rm.plan_status_values(plan), "replan_index": 0}
+    values = {**rm.plan_status_values(plan), "replan_index": 0, "failure_id": 1, "failure_stamp_ns": stamp_ns}
     level = DiagnosticStatus.OK if plan.safe else DiagnosticStatus.ERROR
     return (
         rm.trajectory_message(plan, stamp_ns),
@@ -600,6 +602,15 @@ def touchdown_message(descent_rate: float, forward_speed: float, time_after_fail
     return rm.diagnostic_status(level, "sim: touchdown", "LANDED" if within else "OUTSIDE", "uh60a_class", values)
 
 
+def robust_verdict_message(robust: str, failure_stamp_ns: int, text: str, failure_id: int = 1) -> DiagnosticStatus:
+    """The planner's ``/helireach/robust_verdict`` (msg_docs/helireach_robust_verdict.md) for a failure plan."""
+    level = {"pending": DiagnosticStatus.STALE, "true": DiagnosticStatus.OK}.get(robust, DiagnosticStatus.WARN)
+    values = {"failure_id": failure_id, "failure_stamp_ns": failure_stamp_ns, "robust": robust}
+    if robust != "pending":
+        values.update(robust_models_flown=16 if robust == "true" else 1, robust_design_size=16)
+    return rm.diagnostic_status(level, "helireach_planner: robust verdict", text, "uh60a_class", values)
+
+
 def signed_number(text: str) -> float:
     """A page number such as ``+12`` or ``−3`` (U+2212) as a float."""
     return float(text.replace("\u2212", "-").replace("+", ""))
@@ -659,6 +670,20 @@ def test_whole_run_by_flight_phase(ros: RosHarness, browser: Browser, real_plan:
         vehicle.rotor_speed = 1.135 * 27.0  # inside the 3 % amber band below the 115 % limit
         vehicle.set((float(h), float(v), -float(y)), flying)
         await page.phase("autorotation", "safe", "the verified plan", "VERIFIED")
+        # its robust verdict: pending, then not robust; a verdict of another failure is not shown beside this plan
+        assert (await page.evaluate(PLAN))["robust"] is None
+        wait_until(lambda: vehicle.robust_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        failure_ns = rm.stamp_nanoseconds(start)
+        vehicle.robust_publisher.publish(robust_verdict_message("pending", failure_ns, "PENDING: robust verification"))
+        pending = {"kind": "pending", "text": "ROBUST CHECK PENDING"}
+        await page.wait_for(PLAN, lambda plan: plan["robust"] == pending, "the robust check pending")
+        vehicle.robust_publisher.publish(robust_verdict_message("true", failure_ns + 1, "ROBUST: another failure"))
+        await page.wait_for(PLAN, lambda plan: plan["robust"] is None, "no verdict of another failure")
+        reason = "first gross_weight+5%: touchdown at 7.4 ft/s and 7.2 kt exceeds the limits"
+        vehicle.robust_publisher.publish(robust_verdict_message("false", failure_ns, f"NOT ROBUST: {reason}"))
+        not_robust = {"kind": "not_robust", "text": f"NOT ROBUST: {reason}"}
+        await page.wait_for(PLAN, lambda plan: plan["robust"] == not_robust, "the plan not robust")
+        await page.phase("autorotation", "safe", "the verified plan, not robust", "VERIFIED")  # never shown as ROBUST
         shown = await page.wait_for(
             "window.helireach.cue", lambda cue: cue == "FLARE IN 3 s", "the cue FLARE IN 3 s", timeout_s=5.0
         )
@@ -750,6 +775,28 @@ def ended_plan_status() -> DiagnosticStatus:
     values = {"status": "ended", "safe": False, "verified": False, "fallback": False, "failure_id": 1}
     text = "ENDED (engine recovered): no landing plan; the last trajectory no longer applies"
     return rm.diagnostic_status(DiagnosticStatus.WARN, "helireach_planner: landing plan", text, "test", values)
+
+
+def test_robust_verdict_section_reads_the_verdict_and_its_failure() -> None:
+    pending = robust_verdict_section(robust_verdict_message("pending", 42, "PENDING: robust verification"))
+    assert (pending["robust"], pending["failure_id"], pending["failure_stamp_ns"]) == (
+        "pending",
+        "1",
+        "42",
+    )  # ids as sent
+    assert pending["level"] == "nodata" and pending["models_flown"] is None and pending["error"] is False
+    robust = robust_verdict_section(robust_verdict_message("true", 42, "ROBUST: lands"))
+    assert (robust["robust"], robust["models_flown"], robust["design_size"], robust["level"]) == (
+        "true",
+        16,
+        16,
+        "safe",
+    )
+    failed = robust_verdict_message("false", 42, "NOT ROBUST: no verdict")
+    failed.values.append(KeyValue(key="robust_error", value="true"))
+    assert robust_verdict_section(failed)["error"] is True
+    garbled = robust_verdict_section(robust_verdict_message("maybe", 42, "?"))
+    assert garbled["robust"] is None  # the page shows no verdict rather than guess one
 
 
 def test_episode_and_plan_status_sections_show_ended_and_late_never_verified_green() -> None:

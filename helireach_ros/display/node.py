@@ -20,7 +20,7 @@ Wire format (JSON text frames, SI units; the page converts to ft/kt for people):
 
     {"config": {...},      # on connect and on change: units, stale_after_s, rotor limits, airframe
      "envelope": {...},    # on connect and on change: H-V grid, status codes, boundary, or an error
-     "plan": {...} | null, # on change: trajectory, predicted path, plan status
+     "plan": {...} | null, # on change: trajectory, predicted path, plan status, robust verdict
      "live": {...}}        # every frame: phase banner, status, state, rotor, failure, episode, touchdown, cue
 
 Run: ``helireach display`` or ``python -m helireach_ros.display.node --ros-args -p port:=8080``.
@@ -68,6 +68,7 @@ from helireach_ros.display.sections import (
     finite,
     path_section,
     plan_status_section,
+    robust_verdict_section,
     rotor_limits_section,
     safety_status_section,
     to_json,
@@ -122,6 +123,7 @@ class _Latest:
     trajectory: _Received | None = None
     path: _Received | None = None
     plan_status: _Received | None = None
+    robust_verdict: _Received | None = None
     episode: _Received | None = None
     touchdown: _Received | None = None
     touchdown_from_state: TouchdownFromState | None = None
@@ -204,6 +206,7 @@ class CockpitDisplay(Node):
             (JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, self._on_trajectory, rm.LATCHED_QOS),
             (PathMsg, rm.TOPIC_LANDING_PATH, self._on_path, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_PLAN_STATUS, self._on_plan_status, rm.LATCHED_QOS),
+            (DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT, self._on_robust_verdict, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_TOUCHDOWN, self._on_touchdown, rm.LATCHED_QOS),
         ):
@@ -390,9 +393,7 @@ class CockpitDisplay(Node):
             latest.state = _Received(content, now)
             latest.margins = margins
             if latest.touchdown_from_state is not None and self._in_failure_episode(latest):
-                latest.touchdown_from_state.observe(
-                    content["height_m"], content["climb_ms"], content["speed_ms"], now
-                )
+                latest.touchdown_from_state.observe(content["height_m"], content["climb_ms"], content["speed_ms"], now)
 
         self._store(update)
 
@@ -492,6 +493,9 @@ class CockpitDisplay(Node):
         section["thrust_scale_pct"] = self._thrust_scale_for_plan(section)
         self._store_plan_part("plan_status", section)
 
+    def _on_robust_verdict(self, message: DiagnosticStatus) -> None:
+        self._store_plan_part("robust_verdict", robust_verdict_section(message))
+
     def _on_touchdown(self, message: DiagnosticStatus) -> None:
         content = touchdown_section(message)
 
@@ -514,6 +518,8 @@ class CockpitDisplay(Node):
             plan = None
         else:
             plan = {name: (part.content if part is not None else None) for name, part in parts.items()}
+            # beside the plan only: the page matches it to the plan's failure (a verdict alone is no plan)
+            plan["robust_verdict"] = latest.robust_verdict.content if latest.robust_verdict is not None else None
         self._plan_json = to_json(plan)
         latest.versions["plan"] += 1
 

@@ -29,6 +29,7 @@ __all__ = [
     "finite",
     "path_section",
     "plan_status_section",
+    "robust_verdict_section",
     "rotor_limits_section",
     "safety_status_section",
     "to_json",
@@ -136,8 +137,7 @@ def envelope_section(envelope: Any) -> dict[str, Any]:
         "status": codes.tolist(),
         "boundary": [[finite(height), finite(speed)] for height, speed in boundary],
         "boundary_segments": [
-            [finite(value) for value in segment]
-            for segment in boundary_segments(heights, speeds, codes == 0, boundary)
+            [finite(value) for value in segment] for segment in boundary_segments(heights, speeds, codes == 0, boundary)
         ],
         "envelope_id": str(envelope.envelope_id),
         "airframe": str(getattr(envelope, "airframe_name", "") or ""),
@@ -307,6 +307,30 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
         "gross_weight_n": finite(values.get("gross_weight_n")),
         "density_altitude_m": finite(values.get("density_altitude_m")),
         "values": values,
+    }
+
+
+_ROBUST_VALUES = ("pending", "true", "false")
+
+
+def robust_verdict_section(message: DiagnosticStatus) -> dict[str, Any]:
+    """The failure plan's robust verdict from ``/helireach/robust_verdict`` (``msg_docs/``).
+
+    ``robust`` is ``"pending"``, ``"true"`` or ``"false"`` as sent, anything else None (the page then shows no
+    verdict); ``failure_id`` and ``failure_stamp_ns`` name the failure it belongs to (the page shows it only beside
+    that failure's plan).
+    """
+    values = rm.status_values(message)
+    robust = str(values.get("robust", "")).strip().lower()
+    return {
+        "robust": robust if robust in _ROBUST_VALUES else None,
+        "error": _parse_bool(values.get("robust_error")) is True,
+        "failure_id": values.get("failure_id"),
+        "failure_stamp_ns": values.get("failure_stamp_ns"),
+        "models_flown": finite(values.get("robust_models_flown")),
+        "design_size": finite(values.get("robust_design_size")),
+        "level": banner_level(message.level),
+        "message": str(message.message),
     }
 
 

@@ -390,6 +390,7 @@
       badge.dataset.kind = "ended";
       badge.textContent = "ENDED";
       view.plan.badge = state === "ended" ? "ENDED" : null;
+      view.plan.robust = null;
       return;
     }
     const status = model.plan.status;
@@ -435,6 +436,35 @@
       details.push("no plan status");
     }
     $("plan-detail").textContent = details.join(" \u00b7 ");
+    updateRobustVerdict(status, model.plan.robust_verdict);
+  }
+
+  // The failure plan's robust verdict (/helireach/robust_verdict), shown only beside a plan of the same failure:
+  // a verdict of an earlier failure says nothing of this one. Green only for robust = true.
+  function updateRobustVerdict(status, verdict) {
+    const line = $("plan-robust");
+    const values = (status && status.values) || {};
+    const same =
+      verdict && verdict.robust !== null && verdict.failure_id !== undefined && verdict.failure_id !== null &&
+      String(verdict.failure_id) === String(values.failure_id) &&
+      String(verdict.failure_stamp_ns) === String(values.failure_stamp_ns);
+    line.hidden = !same;
+    view.plan.robust = null;
+    if (!same) return;
+    let kind = "pending";
+    let text = "ROBUST CHECK PENDING";
+    if (verdict.robust === "true") {
+      kind = "robust";
+      text = isNum(verdict.models_flown) ? `ROBUST IN ${fmt(verdict.models_flown)} MODELS` : "ROBUST";
+    } else if (verdict.robust === "false") {
+      kind = "not_robust";
+      const reason = verdict.message.replace(/^NOT ROBUST:\s*/, "");
+      text = verdict.error ? `ROBUST CHECK FAILED: ${reason}` : `NOT ROBUST: ${reason}`;
+    }
+    line.dataset.kind = kind;
+    line.textContent = text;
+    line.title = verdict.message;
+    view.plan.robust = { kind, text };
   }
 
   function updateFooter() {
