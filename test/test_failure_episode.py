@@ -12,6 +12,7 @@ from helireach_ros.core.failure_episode import (
     EpisodeState,
     EpisodeTracker,
     FailureEpisode,
+    PublishedPlan,
     episode_outcome,
     episode_starts,
     late_verdict,
@@ -185,6 +186,15 @@ def test_a_late_safe_plan_is_at_best_a_warning_that_says_how_late() -> None:
     assert level == "WARN" and text.startswith("LATE (state 3.5 s after the failure, 2.5 s too late): SAFE")
     assert late_verdict("ERROR", "UNSAFE: x", late)[0] == "ERROR"
     assert late_verdict("OK", "SAFE: x", plan_lateness(T0, T0, 1.0, after_fallback=True)) == ("OK", "SAFE: x")
+
+
+def test_a_fallback_never_follows_a_plan_from_a_newer_state() -> None:
+    record = FailureEpisode(1, T0, T0)
+    assert not record.has_plan_from(T0)  # nothing out yet
+    deadline_fallback = PublishedPlan(1, 0, T0 + 300 * MS, None, True, 250.0, T0 + 310 * MS, "none")
+    record.remember(deadline_fallback)
+    assert record.has_plan_from(T0 + 100 * MS) and record.has_plan_from(T0 + 300 * MS)  # older or the same state
+    assert not record.has_plan_from(T0 + 400 * MS)  # a newer state: its fallback may go out
 
 
 def test_a_planner_record_stops_once() -> None:

@@ -413,6 +413,15 @@ class FailureEpisode:
     history: list[PublishedPlan] = field(default_factory=list)
     disturbance: DisturbanceTracker | None = None  # the model's error learnt in this descent (None: not estimated)
 
+    def has_plan_from(self, stamp_ns: int) -> bool:
+        """Whether the plan out starts from the state stamped ``stamp_ns`` or a later one.
+
+        A fallback for a solve from that state would then add nothing and go out of order: the deadline's
+        fallback, from the newest state, is published while the solve runs, and a solve that fails afterwards
+        must not follow it with a fallback from its older state.
+        """
+        return self.current is not None and self.current.stamp_ns >= stamp_ns
+
     def remember(self, record: PublishedPlan) -> None:
         """Records a published plan as the episode's current one."""
         self.published = True

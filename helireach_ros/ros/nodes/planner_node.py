@@ -833,8 +833,9 @@ class LandingPlannerNode(Node):
         if plan is None or not plan.solver.success:
             reason = error or f"solver {plan.solver.status}"
             self.get_logger().error(f"failure #{failure.failure_id}: no converged plan ({reason})")
-            if not ((retry and failure.published) or self._standby_is_current(failure)):
-                self._publish_fallback(failure, state, stamp_ns, reason)  # a verified standby beats a fallback
+            out = (retry and failure.published) or failure.has_plan_from(stamp_ns) or self._standby_is_current(failure)
+            if not out:  # a verified standby beats a fallback; one from a newer state is not followed by an older one
+                self._publish_fallback(failure, state, stamp_ns, reason)
             return
         robust = self._robust is not None and plan.safe
         self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False, robust_pending=robust)
