@@ -675,13 +675,13 @@ def test_whole_run_by_flight_phase(ros: RosHarness, browser: Browser, real_plan:
         wait_until(lambda: vehicle.robust_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
         failure_ns = rm.stamp_nanoseconds(start)
         vehicle.robust_publisher.publish(robust_verdict_message("pending", failure_ns, "PENDING: robust verification"))
-        pending = {"kind": "pending", "text": "ROBUST CHECK PENDING"}
+        pending = {"kind": "pending", "text": "FIRST PLAN: ROBUST CHECK PENDING"}
         await page.wait_for(PLAN, lambda plan: plan["robust"] == pending, "the robust check pending")
         vehicle.robust_publisher.publish(robust_verdict_message("true", failure_ns + 1, "ROBUST: another failure"))
         await page.wait_for(PLAN, lambda plan: plan["robust"] is None, "no verdict of another failure")
         reason = "first gross_weight+5%: touchdown at 7.4 ft/s and 7.2 kt exceeds the limits"
         vehicle.robust_publisher.publish(robust_verdict_message("false", failure_ns, f"NOT ROBUST: {reason}"))
-        not_robust = {"kind": "not_robust", "text": f"NOT ROBUST: {reason}"}
+        not_robust = {"kind": "not_robust", "text": f"FIRST PLAN NOT ROBUST: {reason}"}
         await page.wait_for(PLAN, lambda plan: plan["robust"] == not_robust, "the plan not robust")
         await page.phase("autorotation", "safe", "the verified plan, not robust", "VERIFIED")  # never shown as ROBUST
         shown = await page.wait_for(

@@ -451,16 +451,18 @@
     line.hidden = !same;
     view.plan.robust = null;
     if (!same) return;
+    // the verdict is the failure plan's (re-plans are not verified robustly): the text says so
     let kind = "pending";
-    let text = "ROBUST CHECK PENDING";
+    let text = "FIRST PLAN: ROBUST CHECK PENDING";
     if (verdict.robust === "true") {
       kind = "robust";
-      text = isNum(verdict.models_flown) ? `ROBUST IN ${fmt(verdict.models_flown)} MODELS` : "ROBUST";
+      text = isNum(verdict.models_flown) ? `FIRST PLAN ROBUST IN ${fmt(verdict.models_flown)} MODELS` : "FIRST PLAN ROBUST";
     } else if (verdict.robust === "false") {
       kind = "not_robust";
       const reason = verdict.message.replace(/^NOT ROBUST:\s*/, "");
-      text = verdict.error ? `ROBUST CHECK FAILED: ${reason}` : `NOT ROBUST: ${reason}`;
+      text = verdict.error ? `FIRST PLAN: ROBUST CHECK FAILED: ${reason}` : `FIRST PLAN NOT ROBUST: ${reason}`;
     }
+    if (kind === "robust" && view.phase === "stale") kind = "stale"; // never green on a stale page
     line.dataset.kind = kind;
     line.textContent = text;
     line.title = verdict.message;
