@@ -6,6 +6,7 @@ re-check, boundary refinement) with real IPOPT in a few seconds.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import math
@@ -17,7 +18,7 @@ import numpy as np
 import pytest
 
 from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
+from helireach_ros.core.envelope.compute import EnvelopeJob, _sweep_column, compute_envelope
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -497,6 +498,19 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     assert np.all(current.status[kept] == "unsafe") and np.all(current.value[kept] >= 0.25)
     assert current.metadata["refinement"]["sweep"] == "warm through not-safe nodes"
     assert {"sweep", "boundary"} <= set(current.metadata["compute"]["phase_ipopt_s"])
+    # a ground node's plan (it touches down at once) starts no sweep node: the node above the ground is cold,
+    # also above a safe ground node (0 kt), which the legacy sweep warm-starts from
+    job = EnvelopeJob(airframe, settings, 0.0, heights, speeds)
+    column, legacy_column = (
+        _sweep_column(sweep_job, 0)[2] for sweep_job in (job, dataclasses.replace(job, legacy_sweep=True))
+    )
+    assert heights[0] == 0.0 and column[0].status == legacy_column[0].status == STATUS_CODES["safe"]
+    assert not column[1].warm_started and legacy_column[1].warm_started and column[2].warm_started
+    # not-safe nodes are not replayed (a replay cannot change their status); every safe one is, and lands
+    replayed = np.isfinite(current.arrays["replay_value"])
+    assert np.array_equal(replayed, current.status == "safe"), current.status
+    assert np.all(current.arrays["verified"][current.status == "safe"])
+    assert np.all(np.isfinite(legacy.arrays["replay_value"][legacy.status == "unsafe"]))
 
 
 def test_a_computed_envelope_records_where_its_answers_hold(small):
@@ -504,4 +518,3 @@ def test_a_computed_envelope_records_where_its_answers_hold(small):
 
     assert small.metadata["validity_domain"] == ValidityDomain().to_metadata()
     assert ValidityDomain.from_metadata(small.metadata) == ValidityDomain()
-

@@ -9,6 +9,7 @@ from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import WarmStart, get_planner, plan_landing
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.verification import NOT_REPLAYED
 
 
 @pytest.fixture(scope="module")
@@ -59,6 +60,24 @@ def test_hover_at_150ft_is_unsafe(uh60):
     assert plan.solver.success
     assert plan.value > 0.0
     assert plan.status == "unsafe" and not plan.safe
+
+
+def test_a_plan_the_nlp_finds_unsafe_needs_no_replay_for_its_status(uh60):
+    """``replay_not_safe=False`` (the envelope's sweep) skips only replays that cannot change the status."""
+    planner = get_planner(uh60, PlannerSettings())
+    for height_ft, speed_kt, status in ((150, 0, "unsafe"), (600, 0, "safe")):
+        state = initial_state_after_failure(uh60, height_ft * FT, speed_kt * KT)
+        replayed, skipped = planner.plan(state), planner.plan(state, replay_not_safe=False)
+        assert replayed.status == skipped.status == status
+        assert skipped.value == pytest.approx(replayed.value, abs=1e-9)
+        assert replayed.replay.replayed and np.isfinite(replayed.replay.value)
+        if status == "safe":  # a plan that may be called safe is always replayed
+            assert skipped.replay.replayed and skipped.verified
+            assert skipped.replay.value == pytest.approx(replayed.replay.value, abs=1e-9)
+        else:
+            assert not skipped.replay.replayed and not skipped.verified and np.isnan(skipped.replay.value)
+            assert skipped.replay.flyability.violations == (NOT_REPLAYED,)
+            assert skipped.to_dict()["replay"]["lands_within_limits"] is False
 
 
 def test_hover_at_600ft_is_safe(uh60):

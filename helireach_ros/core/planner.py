@@ -10,6 +10,7 @@ warm-start the next solve.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, field
@@ -38,6 +39,7 @@ from helireach_ros.core.units import FT, KT
 from helireach_ros.core.verification import (
     ReplaySummary,
     control_function,
+    not_replayed,
     replay_plan,
     segment_integrator,
     segment_parameters,
@@ -245,6 +247,8 @@ class LandingPlanner:
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
+        *,
+        replay_not_safe: bool = True,
     ) -> LandingPlan:
         """Solves, replays and classifies a landing from ``state``.
 
@@ -262,6 +266,10 @@ class LandingPlanner:
             disturbance: (d_y, d_v, d_Ω) accelerations (m/s², m/s², rad/s²) added to the model's ẏ, v̇, Ω̇ in the
                 NLP, the delay segment and the replay: what the closed loop has learnt of the model's error
                 (:mod:`helireach_ros.core.disturbance`). None: the model as it is.
+            replay_not_safe: False: a plan the NLP already answers ``failed`` or ``unsafe`` is not replayed (a
+                replay cannot make it safe; its :attr:`LandingPlan.replay` is
+                :func:`~helireach_ros.core.verification.not_replayed`). For callers that need only the status,
+                such as the envelope; every plan that may be called safe is replayed either way.
 
         Raises:
             ValueError: for a non-finite or non-physical state or control, or a warm start of another NLP.
@@ -287,11 +295,14 @@ class LandingPlanner:
             decoded, solver_stats, warm = self._solve(np.concatenate([start, control, disturbance]), warm_start)
             if delay > 0.0:
                 decoded = _with_delay(decoded, initial, control, delay)
-        replay = replay_plan(self.airframe, self.settings, initial, decoded, disturbance)
-        if solver_stats.status in DECIDED_BY_DELAY:
-            value = replay.value
+        decided_by_delay = solver_stats.status in DECIDED_BY_DELAY  # its value is the replay's
+        value = math.nan if decided_by_delay else float(terminal_cost(self.airframe, decoded.node_states[:, -1]))
+        if not replay_not_safe and not decided_by_delay and (not solver_stats.success or value > 0.0):
+            replay = not_replayed(self.settings, initial)
         else:
-            value = float(terminal_cost(self.airframe, decoded.node_states[:, -1]))
+            replay = replay_plan(self.airframe, self.settings, initial, decoded, disturbance)
+        if decided_by_delay:
+            value = replay.value
         if not solver_stats.success:
             status = "failed"
         elif value > 0.0:

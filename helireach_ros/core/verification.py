@@ -41,8 +41,10 @@ from helireach_ros.core.transcription.base import DecodedPlan, terminal_cost
 
 __all__ = [
     "CONTACT_SEARCH_S",
+    "NOT_REPLAYED",
     "ReplaySummary",
     "control_function",
+    "not_replayed",
     "replay_plan",
     "segment_integrator",
     "segment_parameters",
@@ -71,6 +73,8 @@ class ReplaySummary:
             path (always measured).
         judged_at_contact: the landing was judged at ground contact and needs ``flyability`` within limits
             (flyable plans); otherwise the paper's rule (best J along the path) and flyability is reported only.
+        replayed: False for a plan that was not integrated (:func:`not_replayed`): the numbers are NaN and it
+            does not land.
     """
 
     value: float
@@ -84,6 +88,32 @@ class ReplaySummary:
     states: np.ndarray
     flyability: FlyabilityReport
     judged_at_contact: bool
+    replayed: bool = True
+
+
+NOT_REPLAYED = "not replayed: the NLP found no landing, which no replay can change"
+
+
+def not_replayed(settings: PlannerSettings, initial_state: np.ndarray) -> ReplaySummary:
+    """The summary of a plan that is not integrated, because its NLP already answers ``failed`` or ``unsafe``
+    and a replay only ever confirms a landing (:meth:`~helireach_ros.core.planner.LandingPlanner.plan` with
+    ``replay_not_safe=False``, the envelope's sweep): NaN numbers, no landing, the reason as the violation."""
+    nan = float("nan")
+    state = np.asarray(initial_state, dtype=float)[:6]
+    return ReplaySummary(
+        value=nan,
+        lands_within_limits=False,
+        touchdown_time=nan,
+        touchdown_state=np.full(6, nan),
+        ground_contact_time=None,
+        rotor_speed_within_limits=False,
+        max_deviation={name: nan for name in STATE_NAMES},
+        times=np.zeros(1),
+        states=state[:, None].copy(),
+        flyability=FlyabilityReport(nan, nan, nan, nan, None, nan, (NOT_REPLAYED,)),
+        judged_at_contact=settings.method == "flyable",
+        replayed=False,
+    )
 
 
 def control_function(control_times: np.ndarray, control_values: np.ndarray, interpolation: str, times) -> np.ndarray:
