@@ -16,8 +16,9 @@ import yaml
 from helireach_ros.core.airframe import ConfigError, load_airframe, parse_airframe
 from helireach_ros.core.flyability import COMMIT_CLIMB_TOLERANCE, check_flyability
 from helireach_ros.core.model import initial_state_after_failure, trim_controls
-from helireach_ros.core.planner import ROTOR_LIMIT_DURING_DELAY, get_planner
+from helireach_ros.core.planner import GROUND_AT_FAILURE, ROTOR_LIMIT_DURING_DELAY, get_planner
 from helireach_ros.core.resources import config_path
+from helireach_ros.core.transcription.base import terminal_cost
 from helireach_ros.core.units import FT, KT
 
 # (height ft, speed kt) across the plane: the issue's cases, the hover band, the knee, high and low speed
@@ -135,6 +136,25 @@ def test_a_delay_the_rotor_cannot_survive_is_unsafe_without_a_solve(airframe, se
     assert plan.solver.status == ROTOR_LIMIT_DURING_DELAY
     assert plan.status == "unsafe" and not plan.replay.lands_within_limits
     assert plan.replay.states[2].min() < airframe.limits.min_rotor_speed_ratio * airframe.nominal_rotor_speed
+
+
+def test_a_failure_on_the_ground_outside_the_touchdown_limits_is_unsafe_without_a_solve(airframe, settings) -> None:
+    """At the ground and not climbing, a flyable plan touches down as it is: at 30 kt or sinking at 500 ft/min that
+    is outside the limits, decided by the replay alone; within them (hover) and climbing away, the NLP plans."""
+    planner = get_planner(airframe, settings)
+    for speed_kt, climb_fpm in ((30.0, 0.0), (60.0, -500.0)):
+        state = initial_state_after_failure(airframe, 0.0, speed_kt * KT, climb_rate=climb_fpm * FT / 60.0)
+        plan = planner.plan(state)
+        assert plan.solver.status == GROUND_AT_FAILURE and plan.solver.iterations == 0
+        assert plan.status == "unsafe" and not plan.replay.lands_within_limits
+        assert plan.replay.ground_contact_time == pytest.approx(0.0, abs=1e-6)
+        assert plan.value == pytest.approx(terminal_cost(airframe, state.as_array()), rel=1e-3)
+    hover = planner.plan(initial_state_after_failure(airframe, 0.0, 0.0))
+    assert hover.solver.iterations > 0 and hover.safe
+    climbing = planner.plan(initial_state_after_failure(airframe, 0.0, 60 * KT, climb_rate=750 * FT / 60.0))
+    assert climbing.solver.status != GROUND_AT_FAILURE and not climbing.safe
+    paper = get_planner(airframe, settings.replace(method="verified"))  # may climb from the ground: no shortcut
+    assert paper.plan(initial_state_after_failure(airframe, 0.0, 30 * KT)).solver.iterations > 0
 
 
 def test_the_unsafe_set_grows_with_the_reaction_delay(airframe, settings) -> None:

@@ -61,11 +61,15 @@ TRANSCRIPTIONS: dict[str, type[Transcription]] = {
     "verified": VerifiedTranscription,
     "paper": PaperTranscription,
 }
-# Solver statuses of plans the reaction delay decides alone (no NLP): the delay segment is the plan, the replay
-# judges it (with the flyable rule, the held controls fly on to the ground).
+# Solver statuses of plans decided without the NLP: the reaction delay alone (the delay segment is the plan, the
+# replay judges it; with the flyable rule, the held controls fly on to the ground), or a flyable plan's ground
+# contact at the failure itself (below the commit height the path may not climb, so a state on the ground and not
+# climbing touches down as it is; decided so only when that state is outside the touchdown limits).
 GROUND_DURING_DELAY = "ground contact during the reaction delay"
 ROTOR_LIMIT_DURING_DELAY = "rotor speed outside its limits during the reaction delay"
+GROUND_AT_FAILURE = "ground contact at the failure, outside the touchdown limits"
 DECIDED_BY_DELAY = (GROUND_DURING_DELAY, ROTOR_LIMIT_DURING_DELAY)
+DECIDED_WITHOUT_NLP = (*DECIDED_BY_DELAY, GROUND_AT_FAILURE)
 
 log = logging.getLogger(__name__)
 _DELAY_SAMPLES = 20  # states checked along the reaction-delay segment (ground, rotor limits)
@@ -288,20 +292,23 @@ class LandingPlanner:
         delay = self.settings.reaction_delay_s if reaction_delay_s is None else float(reaction_delay_s)
         if not (np.isfinite(delay) and 0.0 <= delay <= 10.0):
             raise ValueError(f"the reaction delay must lie in [0, 10] s, got {reaction_delay_s!r}")
-        start, outcome = self._after_delay(initial, control, delay, disturbance) if delay > 0.0 else (initial, "")
+        if delay > 0.0:
+            start, outcome = self._after_delay(initial, control, delay, disturbance)
+        else:
+            start, outcome = initial, GROUND_AT_FAILURE if self._touches_down_outside_limits(initial) else ""
         if outcome:
-            decoded, solver_stats, warm = self._delay_only(initial, start, control, delay, outcome, warm_start)
+            decoded, solver_stats, warm = self._without_nlp(initial, start, control, delay, outcome, warm_start)
         else:
             decoded, solver_stats, warm = self._solve(np.concatenate([start, control, disturbance]), warm_start)
             if delay > 0.0:
                 decoded = _with_delay(decoded, initial, control, delay)
-        decided_by_delay = solver_stats.status in DECIDED_BY_DELAY  # its value is the replay's
-        value = math.nan if decided_by_delay else float(terminal_cost(self.airframe, decoded.node_states[:, -1]))
-        if not replay_not_safe and not decided_by_delay and (not solver_stats.success or value > 0.0):
+        decided_by_replay = solver_stats.status in DECIDED_WITHOUT_NLP  # its value is the replay's
+        value = math.nan if decided_by_replay else float(terminal_cost(self.airframe, decoded.node_states[:, -1]))
+        if not replay_not_safe and not decided_by_replay and (not solver_stats.success or value > 0.0):
             replay = not_replayed(self.settings, initial)
         else:
             replay = replay_plan(self.airframe, self.settings, initial, decoded, disturbance)
-        if decided_by_delay:
+        if decided_by_replay:
             value = replay.value
         if not solver_stats.success:
             status = "failed"
@@ -340,6 +347,18 @@ class LandingPlanner:
         if control.shape != (2,) or not np.all(np.isfinite(control)):
             raise ValueError(f"the initial control is (C_T, theta), finite; got {initial_control!r}")
         return control
+
+    def _touches_down_outside_limits(self, state: np.ndarray) -> bool:
+        """A flyable plan from ``state`` meets the ground at once, outside the touchdown limits: the state is at
+        the ground (h ≤ −ground clearance), not climbing (below the commit height the plan may not climb) and its
+        landing cost J > 0. The NLP has nothing to plan there (it spent up to its iteration limit on such
+        states, e.g. 300 iterations at h = 0 in the descending slices of the envelope); the replay judges it."""
+        return bool(
+            self.settings.method == "flyable"
+            and state[3] <= -self.airframe.limits.ground_clearance
+            and state[0] >= 0.0
+            and terminal_cost(self.airframe, state) > 0.0
+        )
 
     def _after_delay(
         self, state: np.ndarray, control: np.ndarray, delay: float, disturbance: np.ndarray
@@ -396,7 +415,7 @@ class LandingPlanner:
         warm = WarmStart(primal, np.asarray(result["lam_x"]).reshape(-1), np.asarray(result["lam_g"]).reshape(-1))
         return transcription.decode(primal, parameter), solver_stats, warm
 
-    def _delay_only(
+    def _without_nlp(
         self,
         initial: np.ndarray,
         end: np.ndarray,
@@ -405,7 +424,8 @@ class LandingPlanner:
         outcome: str,
         warm_start: WarmStart | None,
     ) -> tuple[DecodedPlan, SolverStats, WarmStart]:
-        """The delay decides (``outcome``): the plan is the delay segment, the replay judges it."""
+        """The delay or the ground decides (``outcome``): the plan is the delay segment (none without a delay), the
+        replay judges it."""
         transcription = self.transcription
         times = np.array([0.0, delay])
         states = np.column_stack([initial, end])
