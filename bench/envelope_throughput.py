@@ -11,8 +11,9 @@ how a node's time splits between IPOPT and the rest of ``plan`` (decode + CVODES
 load average is printed too: other processes on a shared machine slow every number here.
 
 ``--baseline`` runs, for each worker count, the configuration before issue 13 (legacy sweep: cold restart
-after every not-safe node; the warm-solver options of then; plain CasADi functions) and the current one,
-alternating ``--repeat`` times, and prints the ratio of their wall times (the comparison that holds on a
+after every not-safe node, every node replayed; the warm-solver options of then; plain CasADi functions; the
+planner's own answers, such as a failure on the ground decided without the NLP, are the same in both) and the
+current one, alternating ``--repeat`` times, and prints the ratio of their wall times (the comparison that holds on a
 busy machine) and whether the two envelopes classify every node identically.
 """
 
@@ -83,7 +84,12 @@ def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float,
         f"+ re-checks {counters['cold_rechecks']} + boundary {counters['bisection_solves']} "
         f"({counters['bisection_cold_solves']} cold) for {len(envelope.boundary)} boundary points"
     )
-    print(f"  result               {counts}, envelope {envelope.envelope_id}")
+    not_replayed = int(np.isnan(envelope.arrays["replay_value"]).sum())
+    without_nlp = int((envelope.arrays["iterations"] == 0).sum())
+    print(
+        f"  result               {counts}, envelope {envelope.envelope_id}; {not_replayed} nodes not replayed "
+        f"(NLP unsafe/failed), {without_nlp} decided without the NLP (on the ground)"
+    )
     print(f"  load average         {load_before:.2f} before, {os.getloadavg()[0]:.2f} after")
     return wall, sum(compute["phase_solve_and_replay_cpu_s"].values()), envelope.status.copy()
 
