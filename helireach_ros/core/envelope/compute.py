@@ -254,7 +254,7 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
     solver errors become ``failed``.
     """
     from helireach_ros.core.model import initial_state_after_failure
-    from helireach_ros.core.planner import get_planner
+    from helireach_ros.core.planner import DECIDED_WITHOUT_NLP, get_planner
 
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
@@ -270,6 +270,11 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
         log.debug("solve at h=%.2f m, V=%.2f m/s failed: %s", height, speed, error)
         return _Solution(_FAILED, math.nan, math.nan, math.nan, False, -1, 0.0, warm_start is not None)
     failed = plan.status == "failed"
+    if plan.solver.status in DECIDED_WITHOUT_NLP:  # no NLP plan to store or to warm-start from
+        return _Solution(
+            STATUS_CODES[plan.status], plan.value, plan.time_to_land, plan.replay.value, plan.verified, 0, 0.0, False,
+            point_time_ms=1e3 * (time.perf_counter() - started), point_cpu_ms=1e3 * (time.process_time() - started_cpu),
+        )  # fmt: skip
     return _Solution(
         status=STATUS_CODES[plan.status],
         value=math.nan if failed else plan.value,

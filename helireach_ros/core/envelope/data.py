@@ -59,8 +59,6 @@ import io
 import json
 import math
 import os
-import zipfile
-import zlib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -301,16 +299,18 @@ class Envelope:
         # every query reads C × H × S arrays: a 2-D envelope is one slice
         self._stacked = {
             name: self._arrays[name] if self.is_3d else self._arrays[name][None]
-            for name in ("status_code", "value", "plan_primal")
+            for name in ("status_code", "value", "plan_primal", "plan_control_times")
         }
         codes = self._stacked["status_code"]
         primal = self._stacked["plan_primal"]
-        # nodes whose stored plan can warm-start a solve, found once (nearest_plan is on the failure path)
+        # nodes whose stored plan can warm-start a solve and be flown as a fallback, found once (nearest_plan is
+        # on the failure path); a node decided without the NLP (e.g. by a reaction delay) has no plan
         self._usable_plans = (
             (codes >= 0)
             & (codes != STATUS_CODES["failed"])
             & (codes != STATUS_CODES["no_trim"])
             & np.all(np.isfinite(primal), axis=3)
+            & np.all(np.isfinite(self._stacked["plan_control_times"]), axis=3)
         )
         if primal.shape[3] == 0:
             self._usable_plans[:] = False
@@ -811,9 +811,10 @@ def read_envelope_file(path: str | os.PathLike[str], allow_partial: bool = False
     try:
         with np.load(io.BytesIO(raw), allow_pickle=False) as archive:
             contents = {name: archive[name] for name in archive.files}
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError, KeyError) as error:
+    except Exception as error:  # a corrupt archive can fail anywhere in zipfile/numpy's parsers
         raise EnvelopeError(
-            f"envelope file {str(source)!r} is truncated or corrupt (not a readable .npz archive): {error}"
+            f"envelope file {str(source)!r} is truncated or corrupt (not a readable .npz archive): "
+            f"{type(error).__name__}: {error}"
         ) from None
     try:
         metadata_json = contents.pop("metadata_json").tobytes()
