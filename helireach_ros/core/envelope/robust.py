@@ -185,7 +185,9 @@ def add_robust_verdicts(
                 codes[node] = ROBUST_CODES["nominal_not_safe"]
                 continue
             stored = envelope.stored_plan(row, column, slice_index)
-            tasks.append((job, node, stored.height, stored.speed, envelope.power_fraction, stored.warm_start))
+            # a node decided without the NLP (e.g. a touchdown within the reaction delay) stores no plan: cold
+            warm_start = stored.warm_start if np.all(np.isfinite(stored.warm_start.primal)) else None
+            tasks.append((job, node, stored.height, stored.speed, envelope.power_fraction, warm_start))
     started = time.perf_counter()
     plans = 0
     progress.start("robust verification", len(tasks))
