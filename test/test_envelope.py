@@ -524,7 +524,8 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     assert np.array_equal(replayed[solved], (current.status == "safe")[solved]), current.status
     assert current.status[0, 1] == "unsafe" and not solved[0, 1] and replayed[0, 1]
     # such a node stores no plan, and the nearest plan (warm start, fallback) near it is a neighbour's, flyable
-    assert np.all(np.isnan(current.arrays["plan_primal"][0, 1]))
+    assert np.all(np.isnan(current.arrays["plan_primal"][0, 1])) and not current.has_stored_plan(0, 1)
+    assert current.has_stored_plan(0, 0)  # the safe ground node at 0 kt was solved: its plan is stored
     nearest = current.nearest_plan(0.0, speeds[1])
     assert (nearest.height, nearest.speed) != (0.0, speeds[1]) and np.all(np.isfinite(nearest.control_times))
     assert np.all(current.arrays["verified"][current.status == "safe"])

@@ -581,6 +581,11 @@ class Envelope:
         index, row, column = np.unravel_index(int(np.argmin(distance)), distance.shape)
         return self.stored_plan(int(row), int(column), int(index))
 
+    def has_stored_plan(self, row: int, column: int, climb_index: int = 0) -> bool:
+        """Whether node (row, column) [of climb slice ``climb_index``] stores a plan that can warm-start a solve and
+        be flown (what :meth:`nearest_plan` offers; not a node that failed or was decided without the NLP)."""
+        return bool(self._usable_plans[climb_index if self.is_3d else 0, row, column])
+
     def stored_plan(self, row: int, column: int, climb_index: int = 0) -> StoredPlan:
         """The plan stored at grid node (row, column) [of climb slice ``climb_index``], as float64."""
         from helireach_ros.core.planner import WarmStart

@@ -186,7 +186,7 @@ def add_robust_verdicts(
                 continue
             stored = envelope.stored_plan(row, column, slice_index)
             # a node decided without the NLP (e.g. a touchdown within the reaction delay) stores no plan: cold
-            warm_start = stored.warm_start if np.all(np.isfinite(stored.warm_start.primal)) else None
+            warm_start = stored.warm_start if envelope.has_stored_plan(row, column, slice_index) else None
             tasks.append((job, node, stored.height, stored.speed, envelope.power_fraction, warm_start))
     started = time.perf_counter()
     plans = 0
