@@ -1,0 +1,523 @@
+/* MA27's calling sequence over a block sparse LDL^T with 2x2 pivots fixed at analysis.
+ *
+ * IPOPT's augmented system K = [H J^T; J -dc I] has a zero diagonal at every multiplier until IPOPT regularises,
+ * so no 1x1 pivot order works for it. The analysis pairs each multiplier with a primal variable of its constraint
+ * (a maximum bipartite matching that prefers the least-connected variable, e.g. an inequality's own slack); each
+ * pair is one 2x2 pivot [h a; a 0], nonsingular whenever the Jacobian entry a is not zero. Blocks (pairs and the
+ * unpaired primal variables, padded with a unit slot) are ordered by minimum degree, and the factorization is the
+ * up-looking LDL^T of T. Davis's LDL with 2x2 blocks for scalars. Inertia comes from the signs of the 2x2 pivots.
+ */
+#include <math.h>
+#include <pthread.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+static double t_a, t_b, t_c; static long n_a, n_b, n_c;
+static double now(void) { struct timespec ts; clock_gettime(CLOCK_MONOTONIC, &ts); return ts.tv_sec + 1e-9 * ts.tv_nsec; }
+__attribute__((destructor)) static void report(void) { if (getenv("LDL27_TIMES")) fprintf(stderr, "ldl27 times: analyse %ld x %.1f us, factor %ld x %.1f us, solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
+
+typedef int fint;
+#define MAGIC 0x4c444c32
+#define HEADER 8
+
+typedef struct { double m[4]; } blk; /* row-major 2x2 */
+
+static inline void mul(const double *a, const double *b, double *c) { /* c = a b */
+    c[0] = a[0] * b[0] + a[1] * b[2];
+    c[1] = a[0] * b[1] + a[1] * b[3];
+    c[2] = a[2] * b[0] + a[3] * b[2];
+    c[3] = a[2] * b[1] + a[3] * b[3];
+}
+static inline void mul_tn(const double *a, const double *b, double *c) { /* c = a^T b */
+    c[0] = a[0] * b[0] + a[2] * b[2];
+    c[1] = a[0] * b[1] + a[2] * b[3];
+    c[2] = a[1] * b[0] + a[3] * b[2];
+    c[3] = a[1] * b[1] + a[3] * b[3];
+}
+
+static void ma27id_impl(fint *icntl, double *cntl) {
+    memset(icntl, 0, 30 * sizeof(fint));
+    memset(cntl, 0, 5 * sizeof(double));
+    cntl[0] = 0.1;
+}
+
+static int analysis_stamp = 0x5eed;
+static int verbose(void) { return getenv("LDL27_VERBOSE") != NULL; }
+
+/* ---------------------------------------------------------------- analysis */
+/* Analyses by structure: IPOPT analyses again at every solve, of the same matrix structure. */
+#define CACHE_SLOTS 16
+typedef struct { int n, nz; uint64_t hash; int *code; int b, lnz, m0, stamp; long used; } analysis;
+static analysis cache[CACHE_SLOTS];
+static long cache_clock = 0;
+static pthread_mutex_t cache_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static uint64_t structure_hash(int nz, const fint *irn, const fint *icn) {
+    uint64_t h = 1469598103934665603ULL;
+    for (int t = 0; t < nz; t++) {
+        h = (h ^ (uint32_t)irn[t]) * 1099511628211ULL;
+        h = (h ^ (uint32_t)icn[t]) * 1099511628211ULL;
+    }
+    return h;
+}
+
+static int cache_get(int n, int nz, uint64_t hash, fint *ikeep) {
+    int found = 0;
+    pthread_mutex_lock(&cache_lock);
+    for (int s = 0; s < CACHE_SLOTS; s++) {
+        analysis *e = &cache[s];
+        if (e->code && e->n == n && e->nz == nz && e->hash == hash) {
+            memcpy(ikeep, e->code, n * sizeof(fint));
+            ikeep[n] = MAGIC; ikeep[n + 1] = e->b; ikeep[n + 2] = e->lnz; ikeep[n + 3] = e->m0; ikeep[n + 4] = e->stamp;
+            e->used = ++cache_clock;
+            found = 1;
+            break;
+        }
+    }
+    pthread_mutex_unlock(&cache_lock);
+    return found;
+}
+
+static void cache_put(int n, int nz, uint64_t hash, const fint *ikeep) {
+    pthread_mutex_lock(&cache_lock);
+    int victim = 0;
+    for (int s = 0; s < CACHE_SLOTS; s++) {
+        if (!cache[s].code) { victim = s; break; }
+        if (cache[s].used < cache[victim].used) victim = s;
+    }
+    analysis *e = &cache[victim];
+    free(e->code);
+    e->code = malloc(n * sizeof(int));
+    memcpy(e->code, ikeep, n * sizeof(int));
+    e->n = n; e->nz = nz; e->hash = hash;
+    e->b = ikeep[n + 1]; e->lnz = ikeep[n + 2]; e->m0 = ikeep[n + 3]; e->stamp = ikeep[n + 4];
+    e->used = ++cache_clock;
+    pthread_mutex_unlock(&cache_lock);
+}
+
+typedef struct {
+    int n, nz, m0, blocks, unmatched;
+    int *adjp, *adji; /* deduplicated symmetric adjacency of nodes, no diagonal */
+    int *mate;        /* multiplier -> primal and primal -> multiplier, -1 if none */
+} graph;
+
+static void build_graph(graph *g, const fint *irn, const fint *icn) {
+    int n = g->n, nz = g->nz;
+    int *count = calloc(n + 1, sizeof(int));
+    for (int t = 0; t < nz; t++) {
+        int i = irn[t] - 1, j = icn[t] - 1;
+        if (i != j) { count[i + 1]++; count[j + 1]++; }
+    }
+    for (int i = 0; i < n; i++) count[i + 1] += count[i];
+    int *adj = malloc((count[n] > 0 ? count[n] : 1) * sizeof(int)), *cursor = malloc(n * sizeof(int));
+    memcpy(cursor, count, n * sizeof(int));
+    for (int t = 0; t < nz; t++) {
+        int i = irn[t] - 1, j = icn[t] - 1;
+        if (i != j) { adj[cursor[i]++] = j; adj[cursor[j]++] = i; }
+    }
+    /* deduplicate in place */
+    int *mark = malloc(n * sizeof(int));
+    for (int i = 0; i < n; i++) mark[i] = -1;
+    int *p = malloc((n + 1) * sizeof(int));
+    int out = 0;
+    for (int i = 0; i < n; i++) {
+        p[i] = out;
+        for (int q = count[i]; q < count[i + 1]; q++) {
+            int j = adj[q];
+            if (mark[j] != i) { mark[j] = i; adj[out++] = j; }
+        }
+    }
+    p[n] = out;
+    free(count); free(cursor); free(mark);
+    g->adjp = p;
+    g->adji = adj;
+}
+
+static int augment(const graph *g, int j, int *visited, int stamp) {
+    /* Kuhn's augmenting path from multiplier j */
+    for (int q = g->adjp[j]; q < g->adjp[j + 1]; q++) {
+        int i = g->adji[q];
+        if (i >= g->m0 || visited[i] == stamp) continue;
+        visited[i] = stamp;
+        if (g->mate[i] < 0 || augment(g, g->mate[i], visited, stamp)) {
+            g->mate[i] = j;
+            g->mate[j] = i;
+            return 1;
+        }
+    }
+    return 0;
+}
+
+static void match(graph *g) {
+    int n = g->n, m0 = g->m0;
+    g->mate = malloc(n * sizeof(int));
+    for (int i = 0; i < n; i++) g->mate[i] = -1;
+    for (int j = m0; j < n; j++) { /* greedy: the free primal neighbour with the fewest neighbours */
+        int best = -1;
+        for (int q = g->adjp[j]; q < g->adjp[j + 1]; q++) {
+            int i = g->adji[q];
+            if (i >= m0 || g->mate[i] >= 0) continue;
+            if (best < 0 || g->adjp[i + 1] - g->adjp[i] < g->adjp[best + 1] - g->adjp[best]) best = i;
+        }
+        if (best >= 0) { g->mate[best] = j; g->mate[j] = best; }
+    }
+    int *visited = calloc(n, sizeof(int));
+    int unmatched = 0;
+    for (int j = m0; j < n; j++) {
+        if (g->mate[j] >= 0) continue;
+        if (!augment(g, j, visited, j + 1)) unmatched++;
+    }
+    free(visited);
+    g->unmatched = unmatched;
+}
+
+static int popcount_row(const uint64_t *row, int words) {
+    int c = 0;
+    for (int w = 0; w < words; w++) c += __builtin_popcountll(row[w]);
+    return c;
+}
+
+/* Minimum-degree order of the block graph (explicit elimination graph in bitsets: the graphs here are small). */
+static void min_degree(int b, const int *bp, const int *bi, int *order) {
+    int words = (b + 63) / 64;
+    uint64_t *adj = calloc((size_t)b * words, sizeof(uint64_t));
+    for (int u = 0; u < b; u++)
+        for (int q = bp[u]; q < bp[u + 1]; q++) adj[(size_t)u * words + bi[q] / 64] |= 1ULL << (bi[q] % 64);
+    int *deg = malloc(b * sizeof(int));
+    char *done = calloc(b, 1);
+    for (int u = 0; u < b; u++) deg[u] = popcount_row(adj + (size_t)u * words, words);
+    for (int k = 0; k < b; k++) {
+        int v = -1;
+        for (int u = 0; u < b; u++)
+            if (!done[u] && (v < 0 || deg[u] < deg[v])) v = u;
+        order[k] = v;
+        done[v] = 1;
+        uint64_t *rv = adj + (size_t)v * words;
+        for (int w = 0; w < words; w++) {
+            uint64_t bits = rv[w];
+            while (bits) {
+                int u = w * 64 + __builtin_ctzll(bits);
+                bits &= bits - 1;
+                uint64_t *ru = adj + (size_t)u * words;
+                for (int x = 0; x < words; x++) ru[x] |= rv[x];
+                ru[u / 64] &= ~(1ULL << (u % 64));
+                ru[v / 64] &= ~(1ULL << (v % 64));
+                deg[u] = popcount_row(ru, words);
+            }
+        }
+        memset(rv, 0, words * sizeof(uint64_t));
+    }
+    free(adj); free(deg); free(done);
+}
+
+/* Entries of the upper block triangle by column block: row block, where in the 2x2 block, value. */
+static void block_columns(int n, int nz, int b, const fint *irn, const fint *icn, const double *a, const fint *code,
+                          fint *cp, fint *ci, fint *cs, double *cx, fint *pos) {
+    (void)n;
+    memset(cp, 0, (b + 1) * sizeof(fint));
+    for (int t = 0; t < nz; t++) {
+        int bi = code[irn[t] - 1] >> 1, bj = code[icn[t] - 1] >> 1;
+        cp[(bi > bj ? bi : bj) + 1]++;
+    }
+    for (int k = 0; k < b; k++) cp[k + 1] += cp[k];
+    fint *cursor = malloc((b > 0 ? b : 1) * sizeof(fint));
+    memcpy(cursor, cp, b * sizeof(fint));
+    for (int t = 0; t < nz; t++) {
+        int ci_ = code[irn[t] - 1], cj = code[icn[t] - 1];
+        int bi = ci_ >> 1, bj = cj >> 1, si = ci_ & 1, sj = cj & 1;
+        int slot;
+        int col, row;
+        if (bi == bj) { col = row = bi; slot = si == sj ? 3 * si : 4; }
+        else if (bi < bj) { row = bi; col = bj; slot = 2 * si + sj; }
+        else { row = bj; col = bi; slot = 2 * sj + si; }
+        int p = cursor[col]++;
+        ci[p] = row;
+        if (cs) cs[p] = slot;
+        if (cx) cx[p] = a[t];
+        if (pos) pos[t] = p;
+    }
+    free(cursor);
+}
+
+static int block_symbolic(int b, const fint *cp, const fint *ci, fint *lp, fint *parent, fint *lnz, fint *flag) {
+    for (int k = 0; k < b; k++) {
+        parent[k] = -1; flag[k] = k; lnz[k] = 0;
+        for (int p = cp[k]; p < cp[k + 1]; p++) {
+            int i = ci[p];
+            for (; flag[i] != k; i = parent[i]) {
+                if (parent[i] == -1) parent[i] = k;
+                lnz[i]++;
+                flag[i] = k;
+            }
+        }
+    }
+    lp[0] = 0;
+    for (int k = 0; k < b; k++) lp[k + 1] = lp[k] + lnz[k];
+    return lp[b];
+}
+
+static int reals_needed(int nz, int b, int lnz) { return nz + 4 * b + 4 * lnz + 4 * b + nz; }
+static int ints_needed(int n, int nz, int b, int lnz) {
+    return HEADER + n + (b + 1) + lnz + 4 * b + (b + 1) + nz + nz + nz;
+}
+
+static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, fint *iw, const fint *liw,
+                        fint *ikeep, fint *iw1, fint *nsteps, const fint *iflag, fint *icntl, const double *cntl,
+                        fint *info, double *ops) {
+    (void)iw; (void)liw; (void)iw1; (void)iflag; (void)icntl; (void)cntl;
+    int n = *N, nz = *NZ;
+    memset(info, 0, 20 * sizeof(fint));
+    for (int t = 0; t < nz; t++)
+        if (irn[t] < 1 || irn[t] > n || icn[t] < 1 || icn[t] > n) { info[0] = -1; info[1] = t + 1; return; }
+    uint64_t hash = structure_hash(nz, irn, icn);
+    if (n >= 8 && cache_get(n, nz, hash, ikeep)) {
+        int b = ikeep[n + 1], lnz = ikeep[n + 2];
+        *nsteps = 1;
+        *ops = 0;
+        info[4] = reals_needed(nz, b, lnz);
+        info[5] = ints_needed(n, nz, b, lnz);
+        return;
+    }
+    graph g = {n, nz, n, 0, 0, NULL, NULL, NULL};
+    build_graph(&g, irn, icn);
+    /* the trailing independent block: every node from m0 on has no neighbour after it */
+    int m0 = n;
+    while (m0 > 0) {
+        int i = m0 - 1, maxnb = -1;
+        for (int q = g.adjp[i]; q < g.adjp[i + 1]; q++) if (g.adji[q] > maxnb) maxnb = g.adji[q];
+        if (maxnb > i) break;
+        m0--;
+    }
+    if (m0 == 0) m0 = n; /* a diagonal matrix: no multipliers */
+    g.m0 = m0;
+    match(&g);
+    /* blocks: a pair (primal slot 0, multiplier slot 1) or a single node (slot 0) padded with a unit slot 1 */
+    int *block_of = malloc(n * sizeof(int)), *slot_of = malloc(n * sizeof(int));
+    int b = 0;
+    for (int i = 0; i < n; i++) {
+        if (i < m0) {
+            block_of[i] = b; slot_of[i] = 0;
+            if (g.mate[i] >= 0) { block_of[g.mate[i]] = b; slot_of[g.mate[i]] = 1; }
+            b++;
+        } else if (g.mate[i] < 0) {
+            block_of[i] = b++; slot_of[i] = 0;
+        }
+    }
+    /* block graph */
+    int *bcount = calloc(b + 1, sizeof(int));
+    for (int i = 0; i < n; i++)
+        for (int q = g.adjp[i]; q < g.adjp[i + 1]; q++)
+            if (block_of[g.adji[q]] != block_of[i]) bcount[block_of[i] + 1]++;
+    for (int k = 0; k < b; k++) bcount[k + 1] += bcount[k];
+    int *badj = malloc((bcount[b] > 0 ? bcount[b] : 1) * sizeof(int)), *bcur = malloc(b * sizeof(int));
+    memcpy(bcur, bcount, b * sizeof(int));
+    for (int i = 0; i < n; i++)
+        for (int q = g.adjp[i]; q < g.adjp[i + 1]; q++)
+            if (block_of[g.adji[q]] != block_of[i]) badj[bcur[block_of[i]]++] = block_of[g.adji[q]];
+    int *order = malloc(b * sizeof(int)), *position = malloc(b * sizeof(int));
+    min_degree(b, bcount, badj, order);
+    for (int k = 0; k < b; k++) position[order[k]] = k;
+    fint *code = ikeep; /* per node: 2 * (position of its block) + slot */
+    for (int i = 0; i < n; i++) code[i] = 2 * position[block_of[i]] + slot_of[i];
+    fint *cp = malloc((b + 1) * sizeof(fint)), *ci = malloc((nz > 0 ? nz : 1) * sizeof(fint));
+    fint *lp = malloc((b + 1) * sizeof(fint)), *parent = malloc(b * sizeof(fint));
+    fint *lnzc = malloc(b * sizeof(fint)), *flag = malloc(b * sizeof(fint));
+    block_columns(n, nz, b, irn, icn, NULL, code, cp, ci, NULL, NULL, NULL);
+    int lnz = block_symbolic(b, cp, ci, lp, parent, lnzc, flag);
+    double flops = 0;
+    for (int k = 0; k < b; k++) flops += 8.0 * lnzc[k] * lnzc[k];
+    ikeep[n] = MAGIC; ikeep[n + 1] = b; ikeep[n + 2] = lnz; ikeep[n + 3] = m0;
+    ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
+    *nsteps = 1;
+    *ops = flops;
+    info[4] = reals_needed(nz, b, lnz);
+    info[5] = ints_needed(n, nz, b, lnz);
+    if (n >= 8) cache_put(n, nz, hash, ikeep);
+    if (verbose())
+        fprintf(stderr, "ldl27: n %d nz %d primal %d, %d blocks, %d multipliers unpaired, %d L blocks\n", n, nz, m0, b,
+                g.unmatched, lnz);
+    free(cp); free(ci); free(lp); free(parent); free(lnzc); free(flag);
+    free(block_of); free(slot_of); free(bcount); free(badj); free(bcur); free(order); free(position);
+    free(g.adjp); free(g.adji); free(g.mate);
+}
+
+/* ---------------------------------------------------------------- factorization */
+static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, double *a, const fint *la,
+                        fint *iw, const fint *liw, const fint *ikeep, const fint *nsteps, fint *maxfrt, fint *iw1,
+                        const fint *icntl, const double *cntl, fint *info) {
+    (void)nsteps; (void)iw1; (void)icntl; (void)cntl;
+    int n = *N, nz = *NZ;
+    memset(info, 0, 20 * sizeof(fint));
+    if (ikeep[n] != MAGIC) { info[0] = -1; return; }
+    int b = ikeep[n + 1], lnz = ikeep[n + 2];
+    int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
+    if (*liw < need_i) { info[0] = -3; info[1] = need_i; return; }
+    if (*la < need_r) { info[0] = -4; info[1] = need_r; return; }
+    fint *hdr = iw, *code = iw + HEADER, *lp = code + n, *li = lp + b + 1, *parent = li + lnz, *lnzc = parent + b,
+         *flag = lnzc + b, *pattern = flag + b, *cp = pattern + b, *ci = cp + b + 1, *cs = ci + nz, *pos = cs + nz;
+    double *dinv = a + nz, *lx = dinv + 4 * b, *y = lx + 4 * lnz, *cx = y + 4 * b;
+    int stamp = ikeep[n + 4];
+    if (hdr[0] == MAGIC && hdr[5] == stamp && hdr[1] == n && hdr[2] == b && hdr[3] == lnz && hdr[4] == nz) {
+        /* the structure of this analysis is in iw already (an earlier factorization of the same solve) */
+        for (int t = 0; t < nz; t++) cx[pos[t]] = a[t];
+    } else {
+        hdr[0] = 0;
+        memcpy(code, ikeep, n * sizeof(fint));
+        block_columns(n, nz, b, irn, icn, a, code, cp, ci, cs, cx, pos);
+        block_symbolic(b, cp, ci, lp, parent, lnzc, flag);
+        hdr[1] = n; hdr[2] = b; hdr[3] = lnz; hdr[4] = nz; hdr[5] = stamp; hdr[0] = MAGIC;
+    }
+    /* which slots are real: a block whose slot 1 holds no node is padded with 1 on its diagonal */
+    char *real1 = calloc(b, 1);
+    for (int i = 0; i < n; i++) if (code[i] & 1) real1[code[i] >> 1] = 1;
+    double *rowmax = calloc(2 * b, sizeof(double)); /* by slot */
+    for (int t = 0; t < nz; t++) {
+        double v = fabs(a[t]);
+        int s = code[irn[t] - 1], r = code[icn[t] - 1];
+        if (v > rowmax[s]) rowmax[s] = v;
+        if (v > rowmax[r]) rowmax[r] = v;
+    }
+    int negative = 0, perturbed = 0;
+    memset(y, 0, 4 * b * sizeof(double));
+    for (int k = 0; k < b; k++) {
+        int top = b;
+        flag[k] = k;
+        lnzc[k] = 0;
+        for (int p = cp[k]; p < cp[k + 1]; p++) {
+            int i = ci[p];
+            double *yi = y + 4 * i, v = cx[p];
+            if (cs[p] == 4) { yi[1] += v; yi[2] += v; } else yi[cs[p]] += v;
+            int len = 0;
+            for (; flag[i] != k; i = parent[i]) { pattern[len++] = i; flag[i] = k; }
+            while (len > 0) pattern[--top] = pattern[--len];
+        }
+        double dk[4];
+        memcpy(dk, y + 4 * k, sizeof dk);
+        memset(y + 4 * k, 0, 4 * sizeof(double));
+        if (!real1[k]) dk[3] += 1.0;
+        for (; top < b; top++) {
+            int i = pattern[top];
+            double yi[4], t[4], lki[4];
+            memcpy(yi, y + 4 * i, sizeof yi);
+            memset(y + 4 * i, 0, 4 * sizeof(double));
+            int p2 = lp[i] + lnzc[i], p;
+            for (p = lp[i]; p < p2; p++) {
+                mul(lx + 4 * p, yi, t);
+                double *yr = y + 4 * li[p];
+                yr[0] -= t[0]; yr[1] -= t[1]; yr[2] -= t[2]; yr[3] -= t[3];
+            }
+            mul_tn(yi, dinv + 4 * i, lki);
+            mul(lki, yi, t);
+            dk[0] -= t[0]; dk[1] -= t[1]; dk[2] -= t[2]; dk[3] -= t[3];
+            li[p] = k;
+            memcpy(lx + 4 * p, lki, sizeof lki);
+            lnzc[i]++;
+        }
+        double off = 0.5 * (dk[1] + dk[2]);
+        double d0 = dk[0], d3 = dk[3];
+        double det = d0 * d3 - off * off;
+        int singular;
+        if (!real1[k]) {
+            singular = !(fabs(d0) > 1e-14 * rowmax[2 * k]);
+        } else {
+            double term = fmax(fabs(d0 * d3), off * off);
+            singular = !(fabs(det) > 1e-12 * term) || !(term > 1e-28 * rowmax[2 * k] * rowmax[2 * k + 1]);
+        }
+        if (singular) {
+            perturbed++;
+            double t0 = 1e-10 * (rowmax[2 * k] > 0 ? rowmax[2 * k] : 1.0);
+            double t1 = 1e-10 * (rowmax[2 * k + 1] > 0 ? rowmax[2 * k + 1] : 1.0);
+            /* a primal slot gets +t, a multiplier slot -t: the inertia IPOPT asks for */
+            d0 += d0 < 0 ? -t0 : t0;
+            if (real1[k]) d3 -= t1;
+            det = d0 * d3 - off * off;
+        }
+        double *di = dinv + 4 * k;
+        di[0] = d3 / det; di[1] = -off / det; di[2] = -off / det; di[3] = d0 / det;
+        int neg = det < 0 ? 1 : (d0 + d3 < 0 ? 2 : 0);
+        negative += neg;
+    }
+    free(real1); free(rowmax);
+    *maxfrt = 2 * b;
+    info[14] = negative;
+    {
+        static int dumped = 0;
+        const char *dir = getenv("LDL27_DUMPDIR");
+        if (dir && dumped < 400) {
+            char name[512];
+            snprintf(name, sizeof name, "%s/f%04d.txt", dir, dumped++);
+            FILE *f = fopen(name, "w");
+            fprintf(f, "%d %d %d %d\n", n, nz, negative, perturbed);
+            for (int i = 0; i < n; i++) fprintf(f, "%d\n", code[i]);
+            for (int t = 0; t < nz; t++) fprintf(f, "%d %d %.17g\n", irn[t], icn[t], a[t]);
+            fclose(f);
+        }
+    }
+    info[1] = n - perturbed;
+    if (perturbed && !getenv("LDL27_QUIET_PERTURB")) info[0] = 3; /* rank deficient, as MA27 says it: IPOPT regularises and factorizes again */
+    if (verbose() && perturbed) fprintf(stderr, "ldl27: %d perturbed pivots\n", perturbed);
+}
+
+/* ---------------------------------------------------------------- solve */
+static void ma27cd_impl(const fint *N, const double *a, const fint *la, const fint *iw, const fint *liw, double *w,
+                        const fint *maxfrt, double *rhs, const fint *iw1, const fint *nsteps, const fint *icntl,
+                        fint *info) {
+    (void)la; (void)liw; (void)maxfrt; (void)iw1; (void)nsteps; (void)icntl; (void)info;
+    int n = *N, b = iw[2], lnz = iw[3], nz = iw[4];
+    const fint *code = iw + HEADER, *lp = code + n, *li = lp + b + 1;
+    const double *dinv = a + nz, *lx = dinv + 4 * b;
+    (void)lnz;
+    memset(w, 0, 2 * b * sizeof(double));
+    for (int i = 0; i < n; i++) w[code[i]] = rhs[i];
+    for (int j = 0; j < b; j++) {
+        double z0 = w[2 * j], z1 = w[2 * j + 1];
+        for (int p = lp[j]; p < lp[j + 1]; p++) {
+            const double *l = lx + 4 * p;
+            double *zr = w + 2 * li[p];
+            zr[0] -= l[0] * z0 + l[1] * z1;
+            zr[1] -= l[2] * z0 + l[3] * z1;
+        }
+    }
+    for (int j = 0; j < b; j++) {
+        const double *d = dinv + 4 * j;
+        double z0 = w[2 * j], z1 = w[2 * j + 1];
+        w[2 * j] = d[0] * z0 + d[1] * z1;
+        w[2 * j + 1] = d[2] * z0 + d[3] * z1;
+    }
+    for (int j = b - 1; j >= 0; j--) {
+        double z0 = w[2 * j], z1 = w[2 * j + 1];
+        for (int p = lp[j]; p < lp[j + 1]; p++) {
+            const double *l = lx + 4 * p;
+            const double *zr = w + 2 * li[p];
+            z0 -= l[0] * zr[0] + l[2] * zr[1];
+            z1 -= l[1] * zr[0] + l[3] * zr[1];
+        }
+        w[2 * j] = z0; w[2 * j + 1] = z1;
+    }
+    for (int i = 0; i < n; i++) rhs[i] = w[code[i]];
+}
+
+#define TIMED(f, acc, cnt) double s_ = now(); f; acc += now() - s_; cnt++;
+#define ma27ad_timed(...) do { TIMED(ma27ad_impl(__VA_ARGS__), t_a, n_a) } while (0)
+#define ma27bd_timed(...) do { TIMED(ma27bd_impl(__VA_ARGS__), t_b, n_b) } while (0)
+#define ma27cd_timed(...) do { TIMED(ma27cd_impl(__VA_ARGS__), t_c, n_c) } while (0)
+#define EXPORT(name, impl, params, args) \
+    void name params { impl args; } \
+    void name##_ params { impl args; }
+
+EXPORT(ma27id, ma27id_impl, (fint *icntl, double *cntl), (icntl, cntl))
+EXPORT(ma27ad, ma27ad_timed,
+       (const fint *N, const fint *NZ, const fint *irn, const fint *icn, fint *iw, const fint *liw, fint *ikeep,
+        fint *iw1, fint *nsteps, const fint *iflag, fint *icntl, const double *cntl, fint *info, double *ops),
+       (N, NZ, irn, icn, iw, liw, ikeep, iw1, nsteps, iflag, icntl, cntl, info, ops))
+EXPORT(ma27bd, ma27bd_timed,
+       (const fint *N, const fint *NZ, const fint *irn, const fint *icn, double *a, const fint *la, fint *iw,
+        const fint *liw, const fint *ikeep, const fint *nsteps, fint *maxfrt, fint *iw1, const fint *icntl,
+        const double *cntl, fint *info),
+       (N, NZ, irn, icn, a, la, iw, liw, ikeep, nsteps, maxfrt, iw1, icntl, cntl, info))
+EXPORT(ma27cd, ma27cd_timed,
+       (const fint *N, const double *a, const fint *la, const fint *iw, const fint *liw, double *w,
+        const fint *maxfrt, double *rhs, const fint *iw1, const fint *nsteps, const fint *icntl, fint *info),
+       (N, a, la, iw, liw, w, maxfrt, rhs, iw1, nsteps, icntl, info))
