@@ -1,4 +1,8 @@
-/* MA27's calling sequence over a block sparse LDL^T with 2x2 pivots fixed at analysis.
+/* Prototype, not used by the package (README: "A block LDL^T behind IPOPT's MA27 interface"): its pairing is
+ * structural and it reports wrong inertia on some KKT matrices. Debug switches: LDL27_VERBOSE, LDL27_TIMES,
+ * LDL27_DUMP, LDL27_DUMPDIR, LDL27_QUIET_PERTURB.
+ *
+ * MA27's calling sequence over a block sparse LDL^T with 2x2 pivots fixed at analysis.
  *
  * IPOPT's augmented system K = [H J^T; J -dc I] has a zero diagonal at every multiplier until IPOPT regularises,
  * so no 1x1 pivot order works for it. The analysis pairs each multiplier with a primal variable of its constraint
