@@ -185,3 +185,32 @@ def test_the_demo_refuses_a_missing_parameter_file(isolated_ros):
     )
     assert result.returncode == 2 and "nope" in result.stderr and "Traceback" not in result.stderr
 
+
+
+# A node that keeps its executor rebuilding wait sets (a 0.2 ms timer), stopped by a real SIGTERM after 20-40 ms,
+# 150 times in one process: with a bare executor.spin() about one stop in five raised RCLError ("failed to initialize
+# wait set") because rclpy's signal handler shuts the context down from another thread (ros2/rclpy#1166).
+_SIGTERM_LOOP = """
+import os, random, signal, sys, threading
+from rclpy.node import Node
+from helireach_ros.ros import added_order_executor, parameters, qos  # imported now: the first stop is timed too
+from helireach_ros.ros.executors import run_node
+
+class BusyNode(Node):
+    def __init__(self):
+        super().__init__("busy_node")
+        self.create_timer(0.0002, lambda: None)
+
+for _ in range(int(sys.argv[1])):
+    threading.Timer(random.uniform(0.02, 0.04), os.kill, (os.getpid(), signal.SIGTERM)).start()
+    assert run_node(BusyNode, ["busy_node"]) == 0
+print("all stopped cleanly")
+"""
+
+
+def test_run_node_treats_a_sigterm_that_races_the_wait_set_as_a_normal_stop(isolated_ros):
+    script = isolated_ros / "sigterm_loop.py"  # a file: run_node reads the node's source for its name
+    script.write_text(_SIGTERM_LOOP)
+    result = subprocess.run([sys.executable, str(script), "150"], capture_output=True, text=True, timeout=TIMEOUT_S)
+    assert result.returncode == 0 and "all stopped cleanly" in result.stdout, result.stderr[-2000:]
+    assert "Traceback" not in result.stderr

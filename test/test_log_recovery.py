@@ -247,11 +247,12 @@ def test_a_standalone_recorder_writes_the_metadata_replay_compare_needs(
 ) -> None:
     """Multi-process: `helireach_recorder` in its own process beside `helireach bringup --with-sim --no-record`."""
     params = ["--params-file", str(REPO / "config" / "nodes.yaml"), "-p", f"helireach_recorder:log_dir:={tmp_path}"]
+    recorder_stderr = tmp_path / "recorder.stderr"  # its traceback, should it exit with an error
     recorder = subprocess.Popen(
         [str(BIN / "helireach_recorder"), "--ros-args", *params],
         cwd=REPO,
         stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
+        stderr=recorder_stderr.open("wb"),
     )
     bringup = subprocess.Popen(
         [str(BIN / "helireach"), "bringup", "--with-sim", "--no-record"],
@@ -281,7 +282,8 @@ def test_a_standalone_recorder_writes_the_metadata_replay_compare_needs(
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
-    assert recorder.returncode == 0 and is_finished_log(log)
+    assert recorder.returncode == 0, recorder_stderr.read_text()[-3000:]
+    assert is_finished_log(log)
     metadata = read_log_metadata(log)["helireach"]
     assert metadata["airframe"] == "uh60a_class" and metadata["planner_settings"] and metadata["airframe_digest"]
     statuses = [m for m in read_log(log) if m.topic == rm.TOPIC_SAFETY_STATUS]

@@ -42,7 +42,6 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
@@ -77,7 +76,7 @@ from helireach_ros.display.sections import (
 )
 from helireach_ros.display.server import DisplayServerError, PageServer
 from helireach_ros.ros import messages as rm
-from helireach_ros.ros.executors import node_command_line
+from helireach_ros.ros.executors import node_command_line, shutdown_is_a_normal_stop
 from helireach_ros.ros.parameters import ParameterError, declare_checked_parameter
 from helireach_ros.ros.qos import QosWatch
 
@@ -750,17 +749,16 @@ def run_display(
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.ALL)
     display = None
     try:
-        display = CockpitDisplay(parameter_overrides=parameter_overrides or [])
-        print(f"helireach display: {display.url}", flush=True)
-        rclpy.spin(display)
+        with shutdown_is_a_normal_stop():
+            display = CockpitDisplay(parameter_overrides=parameter_overrides or [])
+            print(f"helireach display: {display.url}", flush=True)
+            rclpy.spin(display)
     except DisplayServerError as error:
         print(f"{program}: {error}", file=sys.stderr, flush=True)
         return 1
     except ParameterError as error:
         print(f"{program}: error: {error}", file=sys.stderr, flush=True)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     finally:
         rclpy.try_shutdown()
         if display is not None:

@@ -24,13 +24,21 @@ body of every node's ``main`` (ros2/demos style: ``sys.exit(run_node(NodeClass, 
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import contextlib
+from collections.abc import Callable, Iterator
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from rclpy.node import Node
 
-__all__ = ["DEFAULT_EXECUTOR", "EXECUTOR_KINDS", "create_executor", "node_command_line", "run_node"]
+__all__ = [
+    "DEFAULT_EXECUTOR",
+    "EXECUTOR_KINDS",
+    "create_executor",
+    "node_command_line",
+    "run_node",
+    "shutdown_is_a_normal_stop",
+]
 
 EXECUTOR_KINDS = ("single_threaded", "events")
 """The executor kinds :func:`create_executor` accepts."""
@@ -60,6 +68,29 @@ def create_executor(kind: str, context: Any = None) -> Any:
 
         return AddedOrderExecutor(context=context)
     raise ValueError(f"unknown executor kind {kind!r}; expected one of {', '.join(EXECUTOR_KINDS)}")
+
+
+@contextlib.contextmanager
+def shutdown_is_a_normal_stop(context: Any = None) -> Iterator[None]:
+    """Within this block, a stop (Ctrl-C, SIGTERM, another shutdown of ``context``; default rclpy's) ends quietly.
+
+    rclpy's signal handler shuts the context down from a thread of its own, so a stop can land between the
+    executor's ``context.ok()`` check and the wait set it then builds, or while a node is being built: rclpy
+    raises ``RCLError`` ("failed to initialize wait set" / "failed to create timer: the given context is not
+    valid") instead of ``ExternalShutdownException`` (ros2/rclpy#1166, ros2/ros2cli#854). Here 37 of 200
+    SIGTERMs to a spinning executor did so, and the recorder exited with 1 after finishing its log normally. An
+    error raised once the context is no longer ok is therefore a stop; any other error propagates.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException
+
+    try:
+        yield
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except RuntimeError:  # rclpy's RCLError is one
+        if rclpy.ok(context=context):
+            raise
 
 
 def _one_line(error: BaseException) -> str:
@@ -128,7 +159,6 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
         return early_exit
 
     import rclpy
-    from rclpy.executors import ExternalShutdownException
     from rclpy.signals import SignalHandlerOptions
 
     from helireach_ros.ros.parameters import ParameterError, warn_unknown_parameters
@@ -144,17 +174,16 @@ def run_node(node_class: Callable[..., Node], args: list[str] | None = None) -> 
         return 2
     node = None
     try:
-        node = node_class()
-        drop_parameter_event_handlers(node)
-        warn_unknown_parameters(node)
-        executor = create_executor(DEFAULT_EXECUTOR)
-        executor.add_node(node)
-        executor.spin()
+        with shutdown_is_a_normal_stop():
+            node = node_class()
+            drop_parameter_event_handlers(node)
+            warn_unknown_parameters(node)
+            executor = create_executor(DEFAULT_EXECUTOR)
+            executor.add_node(node)
+            executor.spin()
     except ParameterError as error:
         print(f"{script}: error: {error}", file=sys.stderr)
         return 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
     finally:
         if node is not None:
             node.destroy_node()
