@@ -1,15 +1,21 @@
-/* Prototype, not used by the package (README: "A block LDL^T behind IPOPT's MA27 interface"): its pairing is
- * structural and it reports wrong inertia on some KKT matrices. Debug switches: LDL27_VERBOSE, LDL27_TIMES,
- * LDL27_DUMP, LDL27_DUMPDIR, LDL27_QUIET_PERTURB.
+/* Prototype, not used by the package (README: "A block LDL^T behind IPOPT's MA27 interface"); measured by
+ * bench/prototypes/ldl27_compare.py. Debug switches: LDL27_VERBOSE, LDL27_TIMES, LDL27_DUMP, LDL27_DUMPDIR,
+ * LDL27_QUIET_PERTURB, LDL27_STRUCTURAL_PAIRS (the structural pairing of stop 21, for comparison).
  *
  * MA27's calling sequence over a block sparse LDL^T with 2x2 pivots fixed at analysis.
  *
  * IPOPT's augmented system K = [H J^T; J -dc I] has a zero diagonal at every multiplier until IPOPT regularises,
  * so no 1x1 pivot order works for it. The analysis pairs each multiplier with a primal variable of its constraint
  * (a maximum bipartite matching that prefers the least-connected variable, e.g. an inequality's own slack); each
- * pair is one 2x2 pivot [h a; a 0], nonsingular whenever the Jacobian entry a is not zero. Blocks (pairs and the
- * unpaired primal variables, padded with a unit slot) are ordered by minimum degree, and the factorization is the
- * up-looking LDL^T of T. Davis's LDL with 2x2 blocks for scalars. Inertia comes from the signs of the 2x2 pivots.
+ * pair is one 2x2 pivot [h a; a 0], nonsingular whenever the Jacobian entry a is not zero. The analysis (MA27AD)
+ * sees no values, so the factorization checks its pairs against the values: when a pair's entry is below
+ * PAIR_KEEP times its multiplier's largest entry to a primal variable, it pairs again by value (an entry of at
+ * least PAIR_TAU times that, where a complete pairing allows) and orders anew; the new pairs serve the rest of the
+ * solve. A structural pair on a near-zero entry (2.9e-11 seen) gave element growth to 1e20 and wrong inertia.
+ * Blocks (pairs and the unpaired primal variables, padded with a unit slot) are ordered by minimum degree, and the
+ * factorization is the up-looking LDL^T of T. Davis's LDL with 2x2 blocks for scalars. Inertia comes from the
+ * signs of the 2x2 pivots. There is still no threshold pivoting: a pivot block that the Schur updates make small
+ * is perturbed (reported to IPOPT as rank deficient, so it regularises), never delayed.
  */
 #include <math.h>
 #include <pthread.h>
@@ -18,9 +24,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-static double t_a, t_b, t_c; static long n_a, n_b, n_c;
+static double t_a, t_b, t_c; static long n_a, n_b, n_c, repairs;
 static double now(void) { struct timespec ts; clock_gettime(CLOCK_MONOTONIC, &ts); return ts.tv_sec + 1e-9 * ts.tv_nsec; }
-__attribute__((destructor)) static void report(void) { if (getenv("LDL27_TIMES")) fprintf(stderr, "ldl27 times: analyse %ld x %.1f us, factor %ld x %.1f us, solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
+__attribute__((destructor)) static void report(void) { if (getenv("LDL27_TIMES")) fprintf(stderr, "ldl27 times: analyse %ld x %.1f us, factor %ld x %.1f us (%ld paired anew by values), solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), repairs, n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
 
 typedef int fint;
 #define MAGIC 0x4c444c32
@@ -104,10 +110,12 @@ static void cache_put(int n, int nz, uint64_t hash, const fint *ikeep) {
 typedef struct {
     int n, nz, m0, blocks, unmatched;
     int *adjp, *adji; /* deduplicated symmetric adjacency of nodes, no diagonal */
+    double *adjx;     /* |a| of each adjacency entry (values known), or NULL (structure only) */
     int *mate;        /* multiplier -> primal and primal -> multiplier, -1 if none */
+    double tau;       /* with values: a pair's |a| must be at least tau times its multiplier's largest entry */
 } graph;
 
-static void build_graph(graph *g, const fint *irn, const fint *icn) {
+static void build_graph(graph *g, const fint *irn, const fint *icn, const double *a) {
     int n = g->n, nz = g->nz;
     int *count = calloc(n + 1, sizeof(int));
     for (int t = 0; t < nz; t++) {
@@ -116,13 +124,17 @@ static void build_graph(graph *g, const fint *irn, const fint *icn) {
     }
     for (int i = 0; i < n; i++) count[i + 1] += count[i];
     int *adj = malloc((count[n] > 0 ? count[n] : 1) * sizeof(int)), *cursor = malloc(n * sizeof(int));
+    double *val = a ? malloc((count[n] > 0 ? count[n] : 1) * sizeof(double)) : NULL;
     memcpy(cursor, count, n * sizeof(int));
     for (int t = 0; t < nz; t++) {
         int i = irn[t] - 1, j = icn[t] - 1;
-        if (i != j) { adj[cursor[i]++] = j; adj[cursor[j]++] = i; }
+        if (i != j) {
+            if (val) { val[cursor[i]] = fabs(a[t]); val[cursor[j]] = fabs(a[t]); }
+            adj[cursor[i]++] = j; adj[cursor[j]++] = i;
+        }
     }
-    /* deduplicate in place */
-    int *mark = malloc(n * sizeof(int));
+    /* deduplicate in place (a repeated entry keeps its largest magnitude) */
+    int *mark = malloc(n * sizeof(int)), *where = malloc(n * sizeof(int));
     for (int i = 0; i < n; i++) mark[i] = -1;
     int *p = malloc((n + 1) * sizeof(int));
     int out = 0;
@@ -130,22 +142,35 @@ static void build_graph(graph *g, const fint *irn, const fint *icn) {
         p[i] = out;
         for (int q = count[i]; q < count[i + 1]; q++) {
             int j = adj[q];
-            if (mark[j] != i) { mark[j] = i; adj[out++] = j; }
+            if (mark[j] != i) {
+                mark[j] = i; where[j] = out;
+                if (val) val[out] = val[q];
+                adj[out++] = j;
+            } else if (val && val[q] > val[where[j]]) {
+                val[where[j]] = val[q];
+            }
         }
     }
     p[n] = out;
-    free(count); free(cursor); free(mark);
+    free(count); free(cursor); free(mark); free(where);
     g->adjp = p;
     g->adji = adj;
+    g->adjx = val;
 }
 
-static int augment(const graph *g, int j, int *visited, int stamp) {
-    /* Kuhn's augmenting path from multiplier j */
+/* Whether the edge (multiplier j, primal at adjacency position q) may be a 2x2 pivot: structure only, or an entry
+ * of at least tau times the multiplier's largest entry to a primal node (rowmax). */
+static inline int strong(const graph *g, int q, const double *rowmax, int j) {
+    return !g->adjx || g->adjx[q] >= g->tau * rowmax[j];
+}
+
+static int augment(const graph *g, int j, int *visited, int stamp, const double *rowmax, int strict) {
+    /* Kuhn's augmenting path from multiplier j (strict: over strong edges only) */
     for (int q = g->adjp[j]; q < g->adjp[j + 1]; q++) {
         int i = g->adji[q];
-        if (i >= g->m0 || visited[i] == stamp) continue;
+        if (i >= g->m0 || visited[i] == stamp || (strict && !strong(g, q, rowmax, j))) continue;
         visited[i] = stamp;
-        if (g->mate[i] < 0 || augment(g, g->mate[i], visited, stamp)) {
+        if (g->mate[i] < 0 || augment(g, g->mate[i], visited, stamp, rowmax, strict)) {
             g->mate[i] = j;
             g->mate[j] = i;
             return 1;
@@ -158,22 +183,31 @@ static void match(graph *g) {
     int n = g->n, m0 = g->m0;
     g->mate = malloc(n * sizeof(int));
     for (int i = 0; i < n; i++) g->mate[i] = -1;
-    for (int j = m0; j < n; j++) { /* greedy: the free primal neighbour with the fewest neighbours */
+    double *rowmax = calloc(n, sizeof(double));
+    if (g->adjx)
+        for (int j = m0; j < n; j++)
+            for (int q = g->adjp[j]; q < g->adjp[j + 1]; q++)
+                if (g->adji[q] < m0 && g->adjx[q] > rowmax[j]) rowmax[j] = g->adjx[q];
+    for (int j = m0; j < n; j++) { /* greedy: the free strong primal neighbour with the fewest neighbours */
         int best = -1;
         for (int q = g->adjp[j]; q < g->adjp[j + 1]; q++) {
             int i = g->adji[q];
-            if (i >= m0 || g->mate[i] >= 0) continue;
+            if (i >= m0 || g->mate[i] >= 0 || !strong(g, q, rowmax, j)) continue;
             if (best < 0 || g->adjp[i + 1] - g->adjp[i] < g->adjp[best + 1] - g->adjp[best]) best = i;
         }
         if (best >= 0) { g->mate[best] = j; g->mate[j] = best; }
     }
     int *visited = calloc(n, sizeof(int));
-    int unmatched = 0;
-    for (int j = m0; j < n; j++) {
-        if (g->mate[j] >= 0) continue;
-        if (!augment(g, j, visited, j + 1)) unmatched++;
+    int unmatched = 0, stamp = 0;
+    for (int strict = 1; strict >= 0; strict--) { /* strong edges first; then any edge, so every multiplier pairs */
+        unmatched = 0;
+        for (int j = m0; j < n; j++) {
+            if (g->mate[j] >= 0) continue;
+            if (!augment(g, j, visited, ++stamp, rowmax, strict)) unmatched++;
+        }
+        if (!g->adjx) break;
     }
-    free(visited);
+    free(visited); free(rowmax);
     g->unmatched = unmatched;
 }
 
@@ -267,25 +301,12 @@ static int ints_needed(int n, int nz, int b, int lnz) {
     return HEADER + n + (b + 1) + lnz + 4 * b + (b + 1) + nz + nz + nz;
 }
 
-static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, fint *iw, const fint *liw,
-                        fint *ikeep, fint *iw1, fint *nsteps, const fint *iflag, fint *icntl, const double *cntl,
-                        fint *info, double *ops) {
-    (void)iw; (void)liw; (void)iw1; (void)iflag; (void)icntl; (void)cntl;
-    int n = *N, nz = *NZ;
-    memset(info, 0, 20 * sizeof(fint));
-    for (int t = 0; t < nz; t++)
-        if (irn[t] < 1 || irn[t] > n || icn[t] < 1 || icn[t] > n) { info[0] = -1; info[1] = t + 1; return; }
-    uint64_t hash = structure_hash(nz, irn, icn);
-    if (n >= 8 && cache_get(n, nz, hash, ikeep)) {
-        int b = ikeep[n + 1], lnz = ikeep[n + 2];
-        *nsteps = 1;
-        *ops = 0;
-        info[4] = reals_needed(nz, b, lnz);
-        info[5] = ints_needed(n, nz, b, lnz);
-        return;
-    }
-    graph g = {n, nz, n, 0, 0, NULL, NULL, NULL};
-    build_graph(&g, irn, icn);
+/* The analysis: pairs, block order and L's block count into code[0..n) (2 * block position + slot); with values
+ * (a != NULL) a pair needs an entry of at least tau times its multiplier's largest one where any pairing allows. */
+static void analyse(int n, int nz, const fint *irn, const fint *icn, const double *a, double tau, fint *code,
+                    int *b_out, int *lnz_out, int *m0_out, int *unmatched_out, double *flops_out) {
+    graph g = {n, nz, n, 0, 0, NULL, NULL, NULL, NULL, tau};
+    build_graph(&g, irn, icn, a);
     /* the trailing independent block: every node from m0 on has no neighbour after it */
     int m0 = n;
     while (m0 > 0) {
@@ -323,7 +344,6 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     int *order = malloc(b * sizeof(int)), *position = malloc(b * sizeof(int));
     min_degree(b, bcount, badj, order);
     for (int k = 0; k < b; k++) position[order[k]] = k;
-    fint *code = ikeep; /* per node: 2 * (position of its block) + slot */
     for (int i = 0; i < n; i++) code[i] = 2 * position[block_of[i]] + slot_of[i];
     fint *cp = malloc((b + 1) * sizeof(fint)), *ci = malloc((nz > 0 ? nz : 1) * sizeof(fint));
     fint *lp = malloc((b + 1) * sizeof(fint)), *parent = malloc(b * sizeof(fint));
@@ -332,22 +352,73 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     int lnz = block_symbolic(b, cp, ci, lp, parent, lnzc, flag);
     double flops = 0;
     for (int k = 0; k < b; k++) flops += 8.0 * lnzc[k] * lnzc[k];
+    *b_out = b; *lnz_out = lnz; *m0_out = m0; *unmatched_out = g.unmatched; *flops_out = flops;
+    free(cp); free(ci); free(lp); free(parent); free(lnzc); free(flag);
+    free(block_of); free(slot_of); free(bcount); free(badj); free(bcur); free(order); free(position);
+    free(g.adjp); free(g.adji); free(g.adjx); free(g.mate);
+}
+
+static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, fint *iw, const fint *liw,
+                        fint *ikeep, fint *iw1, fint *nsteps, const fint *iflag, fint *icntl, const double *cntl,
+                        fint *info, double *ops) {
+    (void)iw; (void)liw; (void)iw1; (void)iflag; (void)icntl; (void)cntl;
+    int n = *N, nz = *NZ;
+    memset(info, 0, 20 * sizeof(fint));
+    for (int t = 0; t < nz; t++)
+        if (irn[t] < 1 || irn[t] > n || icn[t] < 1 || icn[t] > n) { info[0] = -1; info[1] = t + 1; return; }
+    uint64_t hash = structure_hash(nz, irn, icn);
+    if (n >= 8 && cache_get(n, nz, hash, ikeep)) {
+        int b = ikeep[n + 1], lnz = ikeep[n + 2];
+        *nsteps = 1;
+        *ops = 0;
+        info[4] = reals_needed(nz, b, 2 * lnz);
+        info[5] = ints_needed(n, nz, b, 2 * lnz);
+        return;
+    }
+    int b, lnz, m0, unmatched;
+    double flops;
+    analyse(n, nz, irn, icn, NULL, 0.0, ikeep, &b, &lnz, &m0, &unmatched, &flops);
     ikeep[n] = MAGIC; ikeep[n + 1] = b; ikeep[n + 2] = lnz; ikeep[n + 3] = m0;
     ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
     *nsteps = 1;
     *ops = flops;
-    info[4] = reals_needed(nz, b, lnz);
-    info[5] = ints_needed(n, nz, b, lnz);
+    /* room for a value-based pairing's extra fill (ma27bd asks for more if even that is short) */
+    info[4] = reals_needed(nz, b, 2 * lnz);
+    info[5] = ints_needed(n, nz, b, 2 * lnz);
     if (n >= 8) cache_put(n, nz, hash, ikeep);
     if (verbose())
         fprintf(stderr, "ldl27: n %d nz %d primal %d, %d blocks, %d multipliers unpaired, %d L blocks\n", n, nz, m0, b,
-                g.unmatched, lnz);
-    free(cp); free(ci); free(lp); free(parent); free(lnzc); free(flag);
-    free(block_of); free(slot_of); free(bcount); free(badj); free(bcur); free(order); free(position);
-    free(g.adjp); free(g.adji); free(g.mate);
+                unmatched, lnz);
 }
 
 /* ---------------------------------------------------------------- factorization */
+/* A multiplier is paired anew when its pair's entry falls below PAIR_KEEP times its largest entry to a primal node;
+ * the new pairs then need PAIR_TAU where any pairing allows (hysteresis: no re-analysis at every iteration). */
+#define PAIR_TAU 1e-2
+#define PAIR_KEEP 1e-4
+
+static int weak_pair(int n, int nz, const fint *irn, const fint *icn, const double *a, const fint *code, int b,
+                     double keep) {
+    double *rowmax = calloc(2 * b, sizeof(double)), *pair = calloc(b, sizeof(double));
+    /* a pair's slot-1 node is its multiplier; a block whose slot 1 holds no node is a single primal node */
+    for (int t = 0; t < nz; t++) {
+        int i = irn[t] - 1, j = icn[t] - 1;
+        if (i == j) continue;
+        int ci_ = code[i], cj = code[j];
+        double v = fabs(a[t]);
+        if ((ci_ >> 1) == (cj >> 1)) { if (v > pair[ci_ >> 1]) pair[ci_ >> 1] = v; continue; }
+        if ((ci_ & 1) && v > rowmax[ci_]) rowmax[ci_] = v;
+        if ((cj & 1) && v > rowmax[cj]) rowmax[cj] = v;
+    }
+    int weak = 0;
+    for (int i = 0; i < n && !weak; i++) {
+        int c = code[i];
+        if (c & 1) weak = pair[c >> 1] < keep * rowmax[c];
+    }
+    free(rowmax); free(pair);
+    return weak;
+}
+
 static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, double *a, const fint *la,
                         fint *iw, const fint *liw, const fint *ikeep, const fint *nsteps, fint *maxfrt, fint *iw1,
                         const fint *icntl, const double *cntl, fint *info) {
@@ -355,20 +426,41 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     int n = *N, nz = *NZ;
     memset(info, 0, 20 * sizeof(fint));
     if (ikeep[n] != MAGIC) { info[0] = -1; return; }
-    int b = ikeep[n + 1], lnz = ikeep[n + 2];
+    fint *hdr = iw, *code = iw + HEADER;
+    int stamp = ikeep[n + 4];
+    /* the pairs in force: this solve's value-based ones if an earlier factorization made them, else the analysis's */
+    int have = hdr[0] == MAGIC && hdr[5] == stamp && hdr[1] == n && hdr[4] == nz;
+    const fint *pairs = have ? code : ikeep;
+    int b = have ? hdr[2] : ikeep[n + 1], lnz = have ? hdr[3] : ikeep[n + 2];
+    if (!getenv("LDL27_STRUCTURAL_PAIRS") && weak_pair(n, nz, irn, icn, a, pairs, b, PAIR_KEEP)) {
+        int m0, unmatched;
+        double flops;
+        fint *fresh = malloc(n * sizeof(fint));
+        analyse(n, nz, irn, icn, a, PAIR_TAU, fresh, &b, &lnz, &m0, &unmatched, &flops);
+        int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
+        if (*liw < need_i || *la < need_r) {
+            free(fresh);
+            if (*liw < need_i) { info[0] = -3; info[1] = need_i; } else { info[0] = -4; info[1] = need_r; }
+            return;
+        }
+        memcpy(code, fresh, n * sizeof(fint));
+        free(fresh);
+        repairs++;
+        have = 0; /* the structure below is built again from this code */
+    } else if (!have) {
+        memcpy(code, ikeep, n * sizeof(fint));
+    }
     int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
     if (*liw < need_i) { info[0] = -3; info[1] = need_i; return; }
     if (*la < need_r) { info[0] = -4; info[1] = need_r; return; }
-    fint *hdr = iw, *code = iw + HEADER, *lp = code + n, *li = lp + b + 1, *parent = li + lnz, *lnzc = parent + b,
+    fint *lp = code + n, *li = lp + b + 1, *parent = li + lnz, *lnzc = parent + b,
          *flag = lnzc + b, *pattern = flag + b, *cp = pattern + b, *ci = cp + b + 1, *cs = ci + nz, *pos = cs + nz;
     double *dinv = a + nz, *lx = dinv + 4 * b, *y = lx + 4 * lnz, *cx = y + 4 * b;
-    int stamp = ikeep[n + 4];
-    if (hdr[0] == MAGIC && hdr[5] == stamp && hdr[1] == n && hdr[2] == b && hdr[3] == lnz && hdr[4] == nz) {
-        /* the structure of this analysis is in iw already (an earlier factorization of the same solve) */
+    if (have) {
+        /* the structure of these pairs is in iw already (an earlier factorization of the same solve) */
         for (int t = 0; t < nz; t++) cx[pos[t]] = a[t];
     } else {
         hdr[0] = 0;
-        memcpy(code, ikeep, n * sizeof(fint));
         block_columns(n, nz, b, irn, icn, a, code, cp, ci, cs, cx, pos);
         block_symbolic(b, cp, ci, lp, parent, lnzc, flag);
         hdr[1] = n; hdr[2] = b; hdr[3] = lnz; hdr[4] = nz; hdr[5] = stamp; hdr[0] = MAGIC;
