@@ -186,7 +186,6 @@ def test_the_demo_refuses_a_missing_parameter_file(isolated_ros):
     assert result.returncode == 2 and "nope" in result.stderr and "Traceback" not in result.stderr
 
 
-
 # A node that keeps its executor rebuilding wait sets (a 0.2 ms timer), stopped by a real SIGTERM after 20-40 ms,
 # 150 times in one process: with a bare executor.spin() about one stop in five raised RCLError ("failed to initialize
 # wait set") because rclpy's signal handler shuts the context down from another thread (ros2/rclpy#1166).

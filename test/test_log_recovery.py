@@ -248,12 +248,13 @@ def test_a_standalone_recorder_writes_the_metadata_replay_compare_needs(
     """Multi-process: `helireach_recorder` in its own process beside `helireach bringup --with-sim --no-record`."""
     params = ["--params-file", str(REPO / "config" / "nodes.yaml"), "-p", f"helireach_recorder:log_dir:={tmp_path}"]
     recorder_stderr = tmp_path / "recorder.stderr"  # its traceback, should it exit with an error
-    recorder = subprocess.Popen(
-        [str(BIN / "helireach_recorder"), "--ros-args", *params],
-        cwd=REPO,
-        stdout=subprocess.DEVNULL,
-        stderr=recorder_stderr.open("wb"),
-    )
+    with recorder_stderr.open("wb") as stderr_file:  # the child keeps its own descriptor
+        recorder = subprocess.Popen(
+            [str(BIN / "helireach_recorder"), "--ros-args", *params],
+            cwd=REPO,
+            stdout=subprocess.DEVNULL,
+            stderr=stderr_file,
+        )
     bringup = subprocess.Popen(
         [str(BIN / "helireach"), "bringup", "--with-sim", "--no-record"],
         cwd=REPO,
