@@ -28,7 +28,8 @@ lint: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench
 
 # Compiled NLP functions for the default airframe and settings (~10 s with gcc; optional: without them the
-# planner uses the plain CasADi functions, ~0.9x slower). HELIREACH_NLP_CACHE, CC, HELIREACH_NLP_CFLAGS apply.
+# planner uses the plain CasADi functions, ~0.9x slower), and the block LDL^T linear solver (~1 s; a planner also
+# builds it at first use). HELIREACH_NLP_CACHE, CC, HELIREACH_NLP_CFLAGS apply.
 nlp-cache: $(STAMP)
 	$(BIN)/python -m helireach_ros.core.compiled_nlp
 

@@ -5,12 +5,20 @@ Imported by the bench scripts (which run with ``bench/`` on ``sys.path``).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.settings import PlannerSettings
 
-__all__ = ["BEFORE_ISSUE_13", "baseline_codegen", "baseline_settings", "loadavg_text", "six_state_settings"]
+__all__ = [
+    "BEFORE_ISSUE_13",
+    "baseline_codegen",
+    "baseline_settings",
+    "loadavg_text",
+    "six_state_settings",
+    "with_mumps",
+]
 
 BEFORE_ISSUE_13 = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2, "closed_form_states": False}
 """The warm-solver options before issue 13 (``bound_push``/``bound_frac`` were IPOPT's defaults) and its NLP,
@@ -29,8 +37,13 @@ def six_state_settings(settings: PlannerSettings) -> PlannerSettings:
 
 
 def baseline_codegen() -> CodegenSettings:
-    """Plain CasADi functions, as before issue 13."""
-    return CodegenSettings(mode="off")
+    """Plain CasADi functions and MUMPS, as before issue 13."""
+    return CodegenSettings(mode="off", linear_solver="mumps")
+
+
+def with_mumps(codegen: CodegenSettings) -> CodegenSettings:
+    """``codegen`` with MUMPS as IPOPT's linear solver (the current configuration before the block LDL^T)."""
+    return dataclasses.replace(codegen, linear_solver="mumps")
 
 
 def loadavg_text() -> str:

@@ -11,7 +11,7 @@ how a node's time splits between IPOPT and the rest of ``plan`` (decode + CVODES
 load average is printed too: other processes on a shared machine slow every number here.
 
 ``--baseline`` runs, for each worker count, the configuration before issue 13 (legacy sweep: cold restart
-after every not-safe node, every node replayed; the warm-solver options of then; plain CasADi functions; the
+after every not-safe node, every node replayed; the warm-solver options of then; plain CasADi functions; MUMPS; the
 planner's own answers, such as a failure on the ground decided without the NLP, are the same in both) and the
 current one, alternating ``--repeat`` times, and prints the ratio of their wall times (the comparison that holds on a
 busy machine) and whether the two envelopes classify every node identically.

@@ -1,79 +1,51 @@
-"""The block LDL^T prototype (``ldl27.c``) against MUMPS inside IPOPT, on the plan-latency bench's states.
+"""IPOPT's linear solvers side by side: the block LDL^T (the default) against MUMPS, on the plan-latency states.
 
-Run: .venv/bin/python bench/prototypes/ldl27_compare.py [--states 60] [--method flyable] [--pairing values|structure]
-     [--dump DIR --dump-states N] [--check-inertia DIR]
+Run: .venv/bin/python bench/linear_solver_compare.py [--states 60] [--method flyable|verified] [--envelope]
+     [--pairing values|structure] [--dump DIR] [--check-inertia DIR]
 
-Builds ``ldl27.c`` with the C compiler (``CC``, default ``gcc``) into a temporary folder and loads it through
-IPOPT's ``linear_solver ma27`` / ``hsllib`` options (IPOPT 3.14 loads MA27's routines from any library). The two
-planners (MUMPS, the prototype) solve the same states, interleaved state by state: a cold solve, then a warm
-solve from that cold plan half a cell away (what the planner node does), as ``bench/plan_latency.py`` does. Prints
-per configuration: total and per-iteration IPOPT time, iterations, statuses, replay verdicts, and the ratio of the
-prototype's time to MUMPS's measured in the same run, with the load average.
+The two planners (``CodegenSettings.linear_solver`` ``mumps`` and ``block_ldl``; compiled NLP functions if the cache
+holds them) solve the same states, interleaved state by state: a cold solve, then a warm solve from that cold plan
+half a cell away (what the planner node does), as ``bench/plan_latency.py`` does. Prints per solver: total and
+per-iteration IPOPT time, iterations, statuses, replay verdicts, and the ratio of the block LDL^T's time to MUMPS's
+measured in the same run, with the load average. ``--envelope`` also computes the 41 × 25 envelope with each, in
+this process, and compares every node.
 
-``--dump DIR`` makes the prototype write the first 400 KKT matrices it factorizes (with the inertia it reported)
-into DIR; ``--check-inertia DIR`` compares each with the inertia of its dense eigenvalues (numpy), the check that
-found the structural pairing's wrong inertia. Options for the bench only: the package never loads this library.
+``--pairing structure`` gives the block LDL^T stop 21's structural pairs (``BLOCK_LDL_STRUCTURAL_PAIRS``).
+``--dump DIR`` makes it write the first 400 KKT matrices it factorizes, with the inertia it reported, into DIR
+(``BLOCK_LDL_DUMPDIR``); ``--check-inertia DIR`` compares each with the inertia of its dense eigenvalues (numpy),
+the check that found the structural pairs' wrong inertia.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
-import subprocess
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from baseline_config import loadavg_text
+from plan_latency import _serpentine_grid
 
-HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(HERE.parent))  # bench/: plan_latency, baseline_config
-
-from baseline_config import loadavg_text  # noqa: E402
-from plan_latency import _serpentine_grid  # noqa: E402
-
-from helireach_ros.core.airframe import load_airframe  # noqa: E402
-from helireach_ros.core.compiled_nlp import CodegenSettings  # noqa: E402
-from helireach_ros.core.model import initial_state_after_failure  # noqa: E402
-from helireach_ros.core.planner import LandingPlanner  # noqa: E402
-from helireach_ros.core.settings import load_settings  # noqa: E402
-from helireach_ros.core.transcription import base  # noqa: E402
-from helireach_ros.core.units import FT, KT  # noqa: E402
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.compiled_nlp import CodegenSettings
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import LandingPlanner
+from helireach_ros.core.settings import load_settings
+from helireach_ros.core.units import FT, KT
 
 
-def build_library(directory: Path) -> Path:
-    """``libldl27.so`` compiled from ``ldl27.c`` (``CC``, ``-O2``)."""
-    library = directory / "libldl27.so"
-    compiler = os.environ.get("CC", "gcc")
-    command = [compiler, "-O2", "-fPIC", "-shared", "-o", str(library), str(HERE / "ldl27.c"), "-lm", "-lpthread"]
-    subprocess.run(command, check=True)
-    return library
+def _codegen(linear_solver: str) -> CodegenSettings:
+    return dataclasses.replace(CodegenSettings.from_environment(), linear_solver=linear_solver)
 
 
-def planner_with(airframe, settings, codegen, extra_options: dict) -> LandingPlanner:
-    """A planner whose IPOPT solvers (cold and warm) get ``extra_options`` on top of the package's own."""
-    original = base.ipopt_solvers
-
-    def with_options(nlp, options, codegen_settings=None):
-        merged = {name: {**values, **extra_options} for name, values in options.items()}
-        return original(nlp, merged, codegen_settings)
-
-    base.ipopt_solvers = with_options
-    try:
-        return LandingPlanner(airframe, settings, codegen)
-    finally:
-        base.ipopt_solvers = original
-
-
-def _compare(airframe, method: str, points, library: Path) -> None:
-    settings, codegen = load_settings(method=method), CodegenSettings.from_environment()
-    configurations = {
-        "mumps": planner_with(airframe, settings, codegen, {}),
-        "ldl27": planner_with(
-            airframe, settings, codegen, {"ipopt.linear_solver": "ma27", "ipopt.hsllib": str(library)}
-        ),
-    }
+def _compare(airframe, method: str, points) -> None:
+    settings = load_settings(method=method)
+    configurations = {name: LandingPlanner(airframe, settings, _codegen(name)) for name in ("mumps", "block_ldl")}
+    for name, planner in configurations.items():
+        print(f"  {name}: {planner.nlp_functions}; linear solver {planner.linear_solver}")
     kinds = ("cold", "warm")
     times = {name: {kind: [] for kind in kinds} for name in configurations}
     iterations = {name: {kind: [] for kind in kinds} for name in configurations}
@@ -103,50 +75,41 @@ def _compare(airframe, method: str, points, library: Path) -> None:
                 f"{sum(verified[name][kind])} verified safe"
             )
     for kind in kinds:
-        same = sum(a == b for a, b in zip(statuses["mumps"][kind], statuses["ldl27"][kind], strict=True))
-        gap = np.nanmax(np.abs(np.subtract(values["mumps"][kind], values["ldl27"][kind])))
-        verdicts = sum(a == b for a, b in zip(verified["mumps"][kind], verified["ldl27"][kind], strict=True))
-        ratio = np.sum(times["ldl27"][kind]) / np.sum(times["mumps"][kind])
-        per_iteration = (np.sum(times["ldl27"][kind]) / np.sum(iterations["ldl27"][kind])) / (
+        same = sum(a == b for a, b in zip(statuses["mumps"][kind], statuses["block_ldl"][kind], strict=True))
+        gap = np.nanmax(np.abs(np.subtract(values["mumps"][kind], values["block_ldl"][kind])))
+        verdicts = sum(a == b for a, b in zip(verified["mumps"][kind], verified["block_ldl"][kind], strict=True))
+        ratio = np.sum(times["block_ldl"][kind]) / np.sum(times["mumps"][kind])
+        per_iteration = (np.sum(times["block_ldl"][kind]) / np.sum(iterations["block_ldl"][kind])) / (
             np.sum(times["mumps"][kind]) / np.sum(iterations["mumps"][kind])
         )
         print(
-            f"  {kind}: ldl27 / mumps total time {ratio:.3f}x, per iteration {per_iteration:.3f}x; same status at "
+            f"  {kind}: block_ldl / mumps total time {ratio:.3f}x, per iteration {per_iteration:.3f}x; same status at "
             f"{same} of {len(points)}, same replay verdict at {verdicts}; max |value difference| {gap:.1e}"
         )
 
 
-def _compare_envelopes(airframe, library: Path) -> None:
-    """The 41 x 25 default envelope computed in this process with MUMPS, then with the prototype."""
+def _compare_envelopes(airframe) -> None:
+    """The 41 x 25 default envelope computed in this process with MUMPS, then with the block LDL^T."""
     from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
     from helireach_ros.core.envelope.grid import parse_range
-    from helireach_ros.core.planner import _cached_planner
 
-    job = EnvelopeJob(airframe, load_settings(), 0.0, parse_range("0:800:41", FT), parse_range("0:120:25", KT))
-    original = base.ipopt_solvers
     results = {}
-    for name, extra in (("mumps", {}), ("ldl27", {"ipopt.linear_solver": "ma27", "ipopt.hsllib": str(library)})):
-
-        def with_options(nlp, options, codegen_settings=None, extra=extra):
-            return original(nlp, {key: {**values, **extra} for key, values in options.items()}, codegen_settings)
-
-        _cached_planner.cache_clear()
-        base.ipopt_solvers = with_options
-        try:
-            started = time.perf_counter()
-            envelope = compute_envelope(job)
-            wall = time.perf_counter() - started
-        finally:
-            base.ipopt_solvers = original
-            _cached_planner.cache_clear()
+    for name in ("mumps", "block_ldl"):
+        job = EnvelopeJob(
+            airframe, load_settings(), 0.0, parse_range("0:800:41", FT), parse_range("0:120:25", KT),
+            codegen=_codegen(name),
+        )  # fmt: skip
+        started = time.perf_counter()
+        envelope = compute_envelope(job)
+        wall = time.perf_counter() - started
         ipopt_s = sum(envelope.metadata["compute"]["phase_ipopt_s"].values())
         counts = {
             status: int((envelope.status == status).sum()) for status in ("safe", "unsafe", "unverified", "failed")
         }
         print(f"  envelope, {name}: {wall:.1f} s wall, IPOPT {ipopt_s:.1f} s, {counts}; load average {loadavg_text()}")
         results[name] = envelope
-    same = int(np.sum(results["mumps"].status == results["ldl27"].status))
-    values = [results[name].arrays["value"] for name in ("mumps", "ldl27")]
+    same = int(np.sum(results["mumps"].status == results["block_ldl"].status))
+    values = [results[name].arrays["value"] for name in ("mumps", "block_ldl")]
     gap = np.nanmax(np.abs(values[0] - values[1]))
     print(f"  envelope: identical classification at {same} of {results['mumps'].status.size} nodes; "
           f"max |value difference| {gap:.1e}")  # fmt: skip
@@ -188,7 +151,7 @@ def check_inertia(directory: Path) -> None:
 
 
 def _weakest_pair(matrix: np.ndarray, code: np.ndarray) -> float:
-    """The smallest |a_ij| / max_k |a_kj| over the prototype's 2x2 pairs (i primal, j its multiplier)."""
+    """The smallest |a_ij| / max_k |a_kj| over the block LDL^T's 2x2 pairs (i primal, j its multiplier)."""
     by_block: dict[int, list[int]] = {}
     for node, value in enumerate(code):
         by_block.setdefault(int(value) >> 1, [None, None])[int(value) & 1] = node
@@ -213,9 +176,9 @@ def main() -> None:
         "--pairing",
         choices=("values", "structure"),
         default="values",
-        help="the prototype's 2x2 pairs: by the Jacobian's values (default) or by structure only",
+        help="the block LDL^T's 2x2 pairs: by the Jacobian's values (default) or by structure only",
     )
-    parser.add_argument("--dump", type=Path, help="write the prototype's first 400 KKT matrices here")
+    parser.add_argument("--dump", type=Path, help="write the block LDL^T's first 400 KKT matrices here")
     parser.add_argument("--check-inertia", type=Path, help="check the matrices dumped in this folder and stop")
     parser.add_argument("--envelope", action="store_true", help="also compute the 41 x 25 envelope with each solver")
     arguments = parser.parse_args()
@@ -224,18 +187,16 @@ def main() -> None:
         check_inertia(arguments.check_inertia)
         return
     if arguments.pairing == "structure":
-        os.environ["LDL27_STRUCTURAL_PAIRS"] = "1"
+        os.environ["BLOCK_LDL_STRUCTURAL_PAIRS"] = "1"
     if arguments.dump is not None:
         arguments.dump.mkdir(parents=True, exist_ok=True)
-        os.environ["LDL27_DUMPDIR"] = str(arguments.dump)
-    os.environ.setdefault("LDL27_TIMES", "1")
+        os.environ["BLOCK_LDL_DUMPDIR"] = str(arguments.dump)
+    os.environ.setdefault("BLOCK_LDL_TIMES", "1")
     started = time.perf_counter()
-    with tempfile.TemporaryDirectory() as directory:
-        library = build_library(Path(directory))
-        airframe = load_airframe(arguments.airframe)
-        _compare(airframe, arguments.method, _serpentine_grid(arguments.states), library)
-        if arguments.envelope:
-            _compare_envelopes(airframe, library)
+    airframe = load_airframe(arguments.airframe)
+    _compare(airframe, arguments.method, _serpentine_grid(arguments.states))
+    if arguments.envelope:
+        _compare_envelopes(airframe)
     print(f"done in {time.perf_counter() - started:.0f} s; load average {loadavg_text()}")
 
 

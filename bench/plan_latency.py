@@ -13,8 +13,9 @@ drag mismatch and noise), each warm from the plan being flown. Times are IPOPT w
 replay, which follows every solve, is timed separately. Prints what it measured on this machine and the load average.
 
 ``--baseline`` also runs the configuration before issue 13 (IPOPT's warm-solver options of then,
-plain CasADi functions), the warm options alone and (verified, flyable) the six-state NLP, distance and engine
-power as NLP variables (``closed_form_states`` off), on the same states (each configuration warm-starts from its
+plain CasADi functions, MUMPS), the warm options alone, (verified, flyable) the six-state NLP, distance and engine
+power as NLP variables (``closed_form_states`` off), and the current NLP with MUMPS instead of the block LDL^T
+(:mod:`helireach_ros.core.block_ldl`), on the same states (each configuration warm-starts from its
 own cold plan of the same state, since the NLPs' layouts differ; the re-plans from the same recorded warm starts),
 interleaved state by state so that load changes hit every configuration alike, and prints each
 configuration's total solve time as a ratio to the baseline's (the comparison that holds on a busy
@@ -31,7 +32,7 @@ import sys
 import time
 
 import numpy as np
-from baseline_config import baseline_codegen, baseline_settings, loadavg_text, six_state_settings
+from baseline_config import baseline_codegen, baseline_settings, loadavg_text, six_state_settings, with_mumps
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
@@ -70,12 +71,19 @@ def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str
         return [current]
     before, plain = baseline_settings(settings), baseline_codegen()
     if settings.method == "paper":  # its NLP has no closed-form states
-        return [("before issue 13", before, plain), ("warm options, plain functions", settings, plain), current]
+        return [
+            ("before issue 13", before, plain),
+            ("warm options, plain functions", settings, with_mumps(plain)),
+            ("warm options, compiled, MUMPS", settings, with_mumps(current[2])),
+            current,
+        ]
     six_states = six_state_settings(settings)
+    mumps = with_mumps(current[2])
     return [
         ("before issue 13", before, plain),
         ("warm options, six states, plain functions", six_states, plain),
-        ("six states, compiled", six_states, current[2]),
+        ("six states, compiled", six_states, mumps),
+        ("closed form, compiled, MUMPS", settings, mumps),
         current,
     ]
 

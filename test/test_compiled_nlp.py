@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.block_ldl import block_ldl_library_path
 from helireach_ros.core.compiled_nlp import CodegenSettings, library_path, nlp_key
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import LandingPlanner
@@ -48,7 +49,7 @@ def test_key_is_stable_and_changes_with_the_nlp_and_the_compiler(uh60, tmp_path)
 def test_cached_mode_without_a_library_uses_the_plain_functions_and_says_so(uh60, tmp_path):
     planner = LandingPlanner(uh60, TINY, CodegenSettings(mode="cached", cache_dir=str(tmp_path)))
     assert "plain" in planner.nlp_functions and "no compiled library" in planner.nlp_functions
-    assert list(tmp_path.iterdir()) == []  # never compiles on its own
+    assert not list(tmp_path.glob("landing_nlp*"))  # never compiles the NLP on its own (block LDL^T: test_block_ldl)
     assert planner.plan(initial_state_after_failure(uh60, 500 * FT, 75 * KT)).solver.iterations > 0
 
 
@@ -58,7 +59,8 @@ def test_a_missing_compiler_falls_back_to_the_plain_functions(uh60, tmp_path, ca
     assert "build failed" in planner.nlp_functions and "no-such-cc" in planner.nlp_functions
     assert "code generation failed" in caplog.text
     assert not library_path(_nlp(planner), codegen).exists()
-    plain = LandingPlanner(uh60, TINY, CodegenSettings(mode="off"))
+    assert planner.linear_solver.startswith("MUMPS (block LDL^T unavailable") and "no-such-cc" in planner.linear_solver
+    plain = LandingPlanner(uh60, TINY, CodegenSettings(mode="off", linear_solver="mumps"))
     state = initial_state_after_failure(uh60, 500 * FT, 75 * KT)
     assert planner.plan(state).value == plain.plan(state).value
 
@@ -75,7 +77,9 @@ def test_compiled_functions_give_the_same_plans_and_a_damaged_library_is_not_loa
     assert compiled.nlp_functions.startswith("compiled library")
     path = library_path(_nlp(compiled), codegen)
     assert path.is_file()
-    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name, path.name + ".sha256"]  # no build leftovers
+    block_ldl = block_ldl_library_path(codegen)
+    libraries = sorted([path.name, path.name + ".sha256", block_ldl.name, block_ldl.name + ".sha256"])
+    assert sorted(p.name for p in tmp_path.iterdir()) == libraries  # no build leftovers
     reused = LandingPlanner(uh60, TINY, CodegenSettings(mode="cached", cache_dir=str(tmp_path)))
     assert reused.nlp_functions == compiled.nlp_functions
     plain = LandingPlanner(uh60, TINY, CodegenSettings(mode="off"))

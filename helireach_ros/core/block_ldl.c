@@ -1,21 +1,24 @@
-/* Prototype, not used by the package (README: "A block LDL^T behind IPOPT's MA27 interface"); measured by
- * bench/prototypes/ldl27_compare.py. Debug switches: LDL27_VERBOSE, LDL27_TIMES, LDL27_DUMP, LDL27_DUMPDIR,
- * LDL27_QUIET_PERTURB, LDL27_STRUCTURAL_PAIRS (the structural pairing of stop 21, for comparison).
- *
- * MA27's calling sequence over a block sparse LDL^T with 2x2 pivots fixed at analysis.
+/* A block LDL^T for IPOPT's KKT systems, behind IPOPT's MA27 interface (helireach_ros.core.block_ldl builds it and
+ * hands it to IPOPT as `linear_solver ma27`, `hsllib <this library>`; IPOPT 3.14 loads MA27's four routines
+ * MA27ID/AD/BD/CD from any library). It replaces MUMPS for the landing NLPs: measured 0.46-0.50x of MUMPS's IPOPT
+ * time on flyable plans, with about the same iterations and the same statuses and replay verdicts (README, issue 13).
  *
  * IPOPT's augmented system K = [H J^T; J -dc I] has a zero diagonal at every multiplier until IPOPT regularises,
  * so no 1x1 pivot order works for it. The analysis pairs each multiplier with a primal variable of its constraint
  * (a maximum bipartite matching that prefers the least-connected variable, e.g. an inequality's own slack); each
  * pair is one 2x2 pivot [h a; a 0], nonsingular whenever the Jacobian entry a is not zero. The analysis (MA27AD)
- * sees no values, so the factorization checks its pairs against the values: when a pair's entry is below
- * PAIR_KEEP times its multiplier's largest entry to a primal variable, it pairs again by value (an entry of at
- * least PAIR_TAU times that, where a complete pairing allows) and orders anew; the new pairs serve the rest of the
- * solve. A structural pair on a near-zero entry (2.9e-11 seen) gave element growth to 1e20 and wrong inertia.
+ * sees no values, so the first factorization of each solve checks its pairs against the values and pairs again by
+ * value where an entry is small relative to its multiplier's largest (PAIR_TAU, PAIR_KEEP below), ordering anew;
+ * the new pairs serve the rest of the solve. (A structural pair on a near-zero entry, 2.9e-11 seen, gave element
+ * growth to 1e20 and wrong inertia.)
  * Blocks (pairs and the unpaired primal variables, padded with a unit slot) are ordered by minimum degree, and the
  * factorization is the up-looking LDL^T of T. Davis's LDL with 2x2 blocks for scalars. Inertia comes from the
- * signs of the 2x2 pivots. There is still no threshold pivoting: a pivot block that the Schur updates make small
- * is perturbed (reported to IPOPT as rank deficient, so it regularises), never delayed.
+ * signs of the 2x2 pivots. There is no threshold pivoting: a pivot block that the Schur updates make small is
+ * perturbed and reported as rank deficient (MA27's warning 3), so IPOPT regularises and factorizes again.
+ *
+ * Debug switches (environment): BLOCK_LDL_VERBOSE, BLOCK_LDL_TIMES (a summary at exit), BLOCK_LDL_DUMPDIR (the
+ * first 400 KKT matrices as text, for bench/prototypes/ldl27_compare.py --check-inertia), BLOCK_LDL_QUIET_PERTURB,
+ * BLOCK_LDL_STRUCTURAL_PAIRS (stop 21's structural pairs, for comparison).
  */
 #include <math.h>
 #include <pthread.h>
@@ -26,7 +29,7 @@
 #include <time.h>
 static double t_a, t_b, t_c; static long n_a, n_b, n_c, repairs;
 static double now(void) { struct timespec ts; clock_gettime(CLOCK_MONOTONIC, &ts); return ts.tv_sec + 1e-9 * ts.tv_nsec; }
-__attribute__((destructor)) static void report(void) { if (getenv("LDL27_TIMES")) fprintf(stderr, "ldl27 times: analyse %ld x %.1f us, factor %ld x %.1f us (%ld paired anew by values), solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), repairs, n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
+__attribute__((destructor)) static void report(void) { if (getenv("BLOCK_LDL_TIMES")) fprintf(stderr, "block_ldl times: analyse %ld x %.1f us, factor %ld x %.1f us (%ld paired anew by values), solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), repairs, n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
 
 typedef int fint;
 #define MAGIC 0x4c444c32
@@ -54,7 +57,7 @@ static void ma27id_impl(fint *icntl, double *cntl) {
 }
 
 static int analysis_stamp = 0x5eed;
-static int verbose(void) { return getenv("LDL27_VERBOSE") != NULL; }
+static int verbose(void) { return getenv("BLOCK_LDL_VERBOSE") != NULL; }
 
 /* ---------------------------------------------------------------- analysis */
 /* Analyses by structure: IPOPT analyses again at every solve, of the same matrix structure. */
@@ -368,6 +371,9 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
         if (irn[t] < 1 || irn[t] > n || icn[t] < 1 || icn[t] > n) { info[0] = -1; info[1] = t + 1; return; }
     uint64_t hash = structure_hash(nz, irn, icn);
     if (n >= 8 && cache_get(n, nz, hash, ikeep)) {
+        /* a fresh stamp: this solve starts from the analysis's pairs, not from pairs an earlier solve left in a
+         * workspace IPOPT reuses, so a solve's answer never depends on the solves before it */
+        ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
         int b = ikeep[n + 1], lnz = ikeep[n + 2];
         *nsteps = 1;
         *ops = 0;
@@ -387,15 +393,18 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     info[5] = ints_needed(n, nz, b, 2 * lnz);
     if (n >= 8) cache_put(n, nz, hash, ikeep);
     if (verbose())
-        fprintf(stderr, "ldl27: n %d nz %d primal %d, %d blocks, %d multipliers unpaired, %d L blocks\n", n, nz, m0, b,
+        fprintf(stderr, "block_ldl: n %d nz %d primal %d, %d blocks, %d multipliers unpaired, %d L blocks\n", n, nz, m0, b,
                 unmatched, lnz);
 }
 
 /* ---------------------------------------------------------------- factorization */
-/* A multiplier is paired anew when its pair's entry falls below PAIR_KEEP times its largest entry to a primal node;
- * the new pairs then need PAIR_TAU where any pairing allows (hysteresis: no re-analysis at every iteration). */
+/* Pairs by value: the first factorization of a solve pairs again whenever a pair's entry is below PAIR_TAU times its
+ * multiplier's largest entry to a primal node (the new pairs need PAIR_TAU where a complete pairing allows); later
+ * factorizations of the solve keep their pairs unless one falls below PAIR_KEEP. Re-pairing is a discrete choice, so
+ * it is made once per solve where possible: re-pairing within a solve at 1e-4 made a closed loop's touchdown 100x more
+ * sensitive to a 1e-7 change of its start (1.3e-3 against 1.3e-5 m/s with MUMPS; 7e-5 with this policy). */
 #define PAIR_TAU 1e-2
-#define PAIR_KEEP 1e-4
+#define PAIR_KEEP 1e-8
 
 static int weak_pair(int n, int nz, const fint *irn, const fint *icn, const double *a, const fint *code, int b,
                      double keep) {
@@ -432,7 +441,7 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     int have = hdr[0] == MAGIC && hdr[5] == stamp && hdr[1] == n && hdr[4] == nz;
     const fint *pairs = have ? code : ikeep;
     int b = have ? hdr[2] : ikeep[n + 1], lnz = have ? hdr[3] : ikeep[n + 2];
-    if (!getenv("LDL27_STRUCTURAL_PAIRS") && weak_pair(n, nz, irn, icn, a, pairs, b, PAIR_KEEP)) {
+    if (!getenv("BLOCK_LDL_STRUCTURAL_PAIRS") && weak_pair(n, nz, irn, icn, a, pairs, b, have ? PAIR_KEEP : PAIR_TAU)) {
         int m0, unmatched;
         double flops;
         fint *fresh = malloc(n * sizeof(fint));
@@ -540,7 +549,7 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     info[14] = negative;
     {
         static int dumped = 0;
-        const char *dir = getenv("LDL27_DUMPDIR");
+        const char *dir = getenv("BLOCK_LDL_DUMPDIR");
         if (dir && dumped < 400) {
             char name[512];
             snprintf(name, sizeof name, "%s/f%04d.txt", dir, dumped++);
@@ -552,8 +561,8 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
         }
     }
     info[1] = n - perturbed;
-    if (perturbed && !getenv("LDL27_QUIET_PERTURB")) info[0] = 3; /* rank deficient, as MA27 says it: IPOPT regularises and factorizes again */
-    if (verbose() && perturbed) fprintf(stderr, "ldl27: %d perturbed pivots\n", perturbed);
+    if (perturbed && !getenv("BLOCK_LDL_QUIET_PERTURB")) info[0] = 3; /* rank deficient, as MA27 says it: IPOPT regularises and factorizes again */
+    if (verbose() && perturbed) fprintf(stderr, "block_ldl: %d perturbed pivots\n", perturbed);
 }
 
 /* ---------------------------------------------------------------- solve */

@@ -28,6 +28,7 @@ Run ``python -m helireach_ros.core.compiled_nlp`` to build the library for the d
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
 import logging
 import os
@@ -35,6 +36,7 @@ import shlex
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,10 +44,13 @@ import casadi as ca
 
 __all__ = [
     "CODEGEN_MODES",
+    "LINEAR_SOLVERS",
     "CodegenSettings",
     "NlpFunctions",
     "build_library",
+    "compile_into_cache",
     "ipopt_solvers",
+    "library_intact",
     "library_path",
     "nlp_functions",
     "nlp_key",
@@ -54,6 +59,9 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 CODEGEN_MODES = ("cached", "build", "off")
+LINEAR_SOLVERS = ("block_ldl", "mumps")
+"""IPOPT's linear solver for the KKT systems: the package's block LDL^T (:mod:`helireach_ros.core.block_ldl`, the
+default; MUMPS wherever it cannot be built) or MUMPS."""
 _DEFAULT_FLAGS = ("-O1",)  # measured: as fast as -O2 for these functions, and compiles in ~11 s instead of ~27 s
 
 
@@ -68,19 +76,24 @@ class CodegenSettings:
 
     Attributes:
         mode: ``"cached"``, ``"build"`` or ``"off"``.
-        cache_dir: where compiled libraries live (one ``<key>.so`` per NLP).
+        cache_dir: where compiled libraries live (one ``<key>.so`` per NLP, one per block LDL^T source).
         compiler: the C compiler command.
         flags: compiler flags (``-shared -fPIC`` are always added).
+        linear_solver: one of :data:`LINEAR_SOLVERS`. Also performance only: the same KKT systems are solved, and
+            every plan called safe is still replayed (measured: the same statuses and replay verdicts).
     """
 
     mode: str = "cached"
     cache_dir: str = field(default_factory=_default_cache_dir)
     compiler: str = "gcc"
     flags: tuple[str, ...] = _DEFAULT_FLAGS
+    linear_solver: str = "block_ldl"
 
     def __post_init__(self) -> None:
         if self.mode not in CODEGEN_MODES:
             raise ValueError(f"code generation mode must be one of {CODEGEN_MODES}, got {self.mode!r}")
+        if self.linear_solver not in LINEAR_SOLVERS:
+            raise ValueError(f"linear solver must be one of {LINEAR_SOLVERS}, got {self.linear_solver!r}")
         if not self.compiler.strip():
             raise ValueError("the C compiler command must not be empty")
         if not isinstance(self.flags, tuple):
@@ -88,13 +101,15 @@ class CodegenSettings:
 
     @classmethod
     def from_environment(cls) -> CodegenSettings:
-        """``HELIREACH_NLP_CODEGEN`` (mode), ``HELIREACH_NLP_CACHE`` (directory), ``CC``, ``HELIREACH_NLP_CFLAGS``."""
+        """``HELIREACH_NLP_CODEGEN`` (mode), ``HELIREACH_NLP_CACHE`` (directory), ``CC``, ``HELIREACH_NLP_CFLAGS``,
+        ``HELIREACH_LINEAR_SOLVER``."""
         flags = os.environ.get("HELIREACH_NLP_CFLAGS")
         return cls(
             mode=os.environ.get("HELIREACH_NLP_CODEGEN", "cached"),
             cache_dir=os.environ.get("HELIREACH_NLP_CACHE") or _default_cache_dir(),
             compiler=os.environ.get("CC") or "gcc",
             flags=tuple(shlex.split(flags)) if flags else _DEFAULT_FLAGS,
+            linear_solver=os.environ.get("HELIREACH_LINEAR_SOLVER") or "block_ldl",
         )
 
 
@@ -129,11 +144,8 @@ def build_library(nlp: dict, settings: CodegenSettings) -> Path:
         RuntimeError: the compiler is missing or fails (the message says which and why).
     """
     target = library_path(nlp, settings)
-    compiler = shlex.split(settings.compiler)
-    if not compiler or shutil.which(compiler[0]) is None:
-        raise RuntimeError(f"C compiler {settings.compiler!r} not found")
     target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent, prefix=".build-") as work:
+    with tempfile.TemporaryDirectory(dir=target.parent, prefix=".generate-") as work:
         solver = ca.nlpsol("landing_nlp", "ipopt", nlp, {"print_time": False})
         # generate_dependencies writes into the working directory; a relative name in a private folder
         source = "landing_nlp.c"
@@ -143,19 +155,35 @@ def build_library(nlp: dict, settings: CodegenSettings) -> Path:
             solver.generate_dependencies(source)
         finally:
             os.chdir(previous)
-        built = Path(work) / "landing_nlp.so"
-        command = [*compiler, *settings.flags, "-shared", "-fPIC", str(Path(work) / source), "-o", str(built)]
+        return compile_into_cache(Path(work) / source, target, settings.compiler, settings.flags)
+
+
+def compile_into_cache(
+    source: Path, target: Path, compiler: str, flags: Sequence[str], libraries: Sequence[str] = ()
+) -> Path:
+    """Compiles one C file into the shared library ``target`` with a checksum beside it (:func:`library_intact`).
+
+    Both files appear by atomic renames: a concurrent process sees no library, a whole one, or one whose checksum
+    does not match yet (then it does not load it); never a half-written file.
+
+    Raises:
+        RuntimeError: the compiler is missing or fails (the message says which and why).
+    """
+    command_start = shlex.split(compiler)
+    if not command_start or shutil.which(command_start[0]) is None:
+        raise RuntimeError(f"C compiler {compiler!r} not found")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory(dir=target.parent, prefix=".build-") as work:
+        built = Path(work) / target.name
+        command = [*command_start, *flags, "-shared", "-fPIC", str(source), "-o", str(built), *libraries]
         try:
             result = subprocess.run(command, capture_output=True, text=True, check=False)
         except OSError as error:
-            raise RuntimeError(f"cannot run {settings.compiler!r}: {error}") from None
+            raise RuntimeError(f"cannot run {compiler!r}: {error}") from None
         if result.returncode != 0:
             raise RuntimeError(f"{shlex.join(command)} failed: {result.stderr.strip()[-500:]}")
-        digest = _file_digest(built)
         checksum = Path(work) / "checksum"
-        checksum.write_text(digest + "\n")
-        # atomic renames: a concurrent planner sees no library, a whole one, or one whose checksum does not
-        # match yet (then it uses the plain functions); never a half-written file
+        checksum.write_text(_file_digest(built) + "\n")
         os.replace(built, target)
         os.replace(checksum, _checksum_path(target))
     return target
@@ -169,7 +197,7 @@ def _file_digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def _library_intact(library: Path) -> bool:
+def library_intact(library: Path) -> bool:
     """The library matches the checksum written with it: loading a truncated or damaged shared library can
     crash the process (SIGBUS in the dynamic loader), so it is checked before ``dlopen``."""
     try:
@@ -188,11 +216,11 @@ def nlp_functions(nlp: dict, settings: CodegenSettings | None = None) -> NlpFunc
     if settings.mode == "off":
         return NlpFunctions(nlp, False, "plain CasADi functions (code generation off)")
     path = library_path(nlp, settings)
-    if path.is_file() and not _library_intact(path):
+    if path.is_file() and not library_intact(path):
         if settings.mode == "cached":
             return NlpFunctions(nlp, False, f"plain CasADi functions ({path} does not match its checksum)")
         log.warning("%s does not match its checksum: rebuilding it", path)
-    if not path.is_file() or not _library_intact(path):
+    if not path.is_file() or not library_intact(path):
         if settings.mode == "cached":
             return NlpFunctions(
                 nlp, False, f"plain CasADi functions (no compiled library {path.name} in {settings.cache_dir}; "
@@ -230,7 +258,8 @@ def ipopt_solvers(
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Builds the compiled library for an airframe with the default planner settings (``make nlp-cache``)."""
+    """Builds the compiled library for an airframe with the default planner settings, and the block LDL^T
+    (``make nlp-cache``)."""
     from helireach_ros.core.airframe import load_airframe
     from helireach_ros.core.planner import LandingPlanner
     from helireach_ros.core.settings import load_settings
@@ -239,11 +268,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--airframe", action="append", help="airframe name (repeatable; default uh60a_class)")
     parser.add_argument("--settings", help="planner settings file (default config/planner.yaml)")
     arguments = parser.parse_args(argv)
-    codegen = CodegenSettings.from_environment()
-    codegen = CodegenSettings("build", codegen.cache_dir, codegen.compiler, codegen.flags)
+    codegen = dataclasses.replace(CodegenSettings.from_environment(), mode="build")
     for name in arguments.airframe or ["uh60a_class"]:
         planner = LandingPlanner(load_airframe(name), load_settings(arguments.settings), codegen)
-        print(f"{name}: {planner.nlp_functions}")
+        print(f"{name}: {planner.nlp_functions}; linear solver {planner.linear_solver}")
 
 
 if __name__ == "__main__":

@@ -237,12 +237,20 @@ class LandingPlanner:
         self.transcription: Transcription = TRANSCRIPTIONS[settings.method](airframe, settings, codegen)
         self.build_time_s = time.perf_counter() - started
         self._lock = threading.Lock()
-        log.info("landing NLP (%s) built in %.2f s on %s", settings.method, self.build_time_s, self.nlp_functions)
+        log.info(
+            "landing NLP (%s) built in %.2f s on %s, linear solver %s",
+            settings.method, self.build_time_s, self.nlp_functions, self.linear_solver,
+        )  # fmt: skip
 
     @property
     def nlp_functions(self) -> str:
         """Which NLP functions the solvers use: compiled (the library's path) or plain, and why."""
         return self.transcription.nlp_functions
+
+    @property
+    def linear_solver(self) -> str:
+        """IPOPT's linear solver: the block LDL^T (the library's path) or MUMPS, and why."""
+        return self.transcription.linear_solver
 
     def plan(
         self,

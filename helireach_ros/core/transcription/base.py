@@ -24,6 +24,7 @@ import casadi as ca
 import numpy as np
 
 from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.block_ldl import linear_solver_options
 from helireach_ros.core.compiled_nlp import CodegenSettings, ipopt_solvers
 from helireach_ros.core.model import disturbed_dynamics_function, trim_level_flight
 from helireach_ros.core.settings import PlannerSettings
@@ -83,7 +84,8 @@ class Transcription(ABC):
     dynamics carry (:func:`~helireach_ros.core.model.disturbed_dynamics_function`; :data:`PARAMETER_SIZE`). Subclasses
     define the decision vector, constraints, cold initial guess and decoding; this class supplies scaling,
     bounds and the IPOPT solvers (on compiled NLP functions when the cache has them,
-    :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which).
+    :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which; with the block LDL^T as IPOPT's linear
+    solver where it can be built, :mod:`helireach_ros.core.block_ldl`; ``linear_solver`` says which).
     """
 
     def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
@@ -135,6 +137,10 @@ class Transcription(ABC):
                 "ipopt.mu_init": 1e-4,
             }
         )
+        codegen = codegen or CodegenSettings.from_environment()
+        linear_solver, self.linear_solver = linear_solver_options(codegen)
+        base.update(linear_solver)
+        warm.update(linear_solver)
         solvers, self.nlp_functions = ipopt_solvers(nlp, {"landing_cold": base, "landing_warm": warm}, codegen)
         self.cold_solver, self.warm_solver = solvers["landing_cold"], solvers["landing_warm"]
 

@@ -1,0 +1,198 @@
+"""The block LDL^T (IPOPT's linear solver): its factorization against numpy, its build cache, its fallback to
+MUMPS, and the plans it gives against MUMPS's (real IPOPT).
+
+The factorization is called directly through MA27's interface (ctypes), as IPOPT calls it: KKT matrices
+[H J^T; J -δ I] with the multipliers last, their inertia (n positive, m negative eigenvalues) and solutions
+checked against dense numpy.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import dataclasses
+import shutil
+
+import numpy as np
+import pytest
+
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.block_ldl import block_ldl_library, block_ldl_library_path, linear_solver_options
+from helireach_ros.core.compiled_nlp import CodegenSettings, library_intact
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import LandingPlanner
+from helireach_ros.core.settings import load_settings
+from helireach_ros.core.units import FT, KT
+
+pytestmark = pytest.mark.skipif(shutil.which("gcc") is None, reason="no C compiler: the planner uses MUMPS")
+
+# IPOPT accepts a linear solve whose residual ratio is below its option residual_ratio_max (default 1e-10) and refines
+# it otherwise. Without threshold pivoting the block LDL^T is not backward stable to machine precision: on these
+# random KKT matrices its backward error reaches ~4e-11 where numpy's (LU with pivoting) stays ~1e-16.
+RESIDUAL_RATIO_MAX = 1e-10
+_INT = ctypes.POINTER(ctypes.c_int)
+_DOUBLE = ctypes.POINTER(ctypes.c_double)
+
+
+@pytest.fixture(scope="module")
+def library(tmp_path_factory) -> ctypes.CDLL:
+    cache = tmp_path_factory.mktemp("block_ldl_cache")
+    return ctypes.CDLL(str(block_ldl_library(CodegenSettings(cache_dir=str(cache)))))
+
+
+def _ints(values) -> np.ndarray:
+    return np.ascontiguousarray(values, dtype=np.int32)
+
+
+def _pointer(array: np.ndarray):
+    return array.ctypes.data_as(_INT if array.dtype == np.int32 else _DOUBLE)
+
+
+def factorize_and_solve(library: ctypes.CDLL, matrix: np.ndarray, rhs: np.ndarray) -> tuple[int, np.ndarray, int]:
+    """MA27's calls as IPOPT makes them: (negative eigenvalues reported, solution, MA27 flag of the factorization)."""
+    n = matrix.shape[0]
+    rows, columns = np.nonzero(np.triu(matrix))  # IPOPT passes one triangle, 1-based
+    values = matrix[rows, columns]
+    irn, icn = _ints(rows + 1), _ints(columns + 1)
+    size, nz = ctypes.c_int(n), ctypes.c_int(len(values))
+    icntl, cntl, info = _ints(np.zeros(30)), np.zeros(5), _ints(np.zeros(20))
+    library.ma27id_(_pointer(icntl), _pointer(cntl))
+    ikeep, iw1 = _ints(np.zeros(3 * n)), _ints(np.zeros(2 * n))
+    nsteps, iflag, ops = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
+    liw = ctypes.c_int(1)
+    iw = _ints(np.zeros(1))
+    library.ma27ad_(ctypes.byref(size), ctypes.byref(nz), _pointer(irn), _pointer(icn), _pointer(iw),
+                    ctypes.byref(liw), _pointer(ikeep), _pointer(iw1), ctypes.byref(nsteps), ctypes.byref(iflag),
+                    _pointer(icntl), _pointer(cntl), _pointer(info), ctypes.byref(ops))  # fmt: skip
+    assert info[0] == 0, info
+    la, liw = ctypes.c_int(int(info[4])), ctypes.c_int(int(info[5]))
+    for _ in range(3):  # as IPOPT does: more memory when the factorization asks for it (-3 integers, -4 reals)
+        a, iw = np.zeros(la.value), _ints(np.zeros(liw.value))
+        a[: len(values)] = values
+        maxfrt = ctypes.c_int(0)
+        library.ma27bd_(
+            ctypes.byref(size), ctypes.byref(nz), _pointer(irn), _pointer(icn), _pointer(a), ctypes.byref(la),
+            _pointer(iw), ctypes.byref(liw), _pointer(ikeep), ctypes.byref(nsteps), ctypes.byref(maxfrt),
+            _pointer(iw1), _pointer(icntl), _pointer(cntl), _pointer(info),
+        )  # fmt: skip
+        if info[0] == -3:
+            liw = ctypes.c_int(int(info[1]))
+        elif info[0] == -4:
+            la = ctypes.c_int(int(info[1]))
+        else:
+            break
+    assert info[0] >= 0, info
+    flag, negative = int(info[0]), int(info[14])
+    solution, work = np.array(rhs, dtype=float), np.zeros(max(maxfrt.value, 1))
+    library.ma27cd_(ctypes.byref(size), _pointer(a), ctypes.byref(la), _pointer(iw), ctypes.byref(liw),
+                    _pointer(work), ctypes.byref(maxfrt), _pointer(solution), _pointer(iw1), ctypes.byref(nsteps),
+                    _pointer(icntl), _pointer(info))  # fmt: skip
+    return negative, solution, flag
+
+
+def backward_error(matrix: np.ndarray, solution: np.ndarray, rhs: np.ndarray) -> float:
+    """‖Ax − b‖ / (‖A‖ ‖x‖ + ‖b‖): what a stable factorization keeps near machine precision whatever the condition."""
+    scale = np.linalg.norm(matrix, 2) * np.linalg.norm(solution) + np.linalg.norm(rhs)
+    return float(np.linalg.norm(matrix @ solution - rhs) / scale)
+
+
+def kkt_matrix(rng: np.random.Generator, n: int, m: int, weak_entry: float | None = None) -> np.ndarray:
+    """[H J^T; J 0] with H symmetric positive definite on J's null space, J banded (a collocation-like chain).
+
+    With ``weak_entry``, constraint 0's least-connected variable (the one a structural pairing prefers) has that
+    coefficient, and a well-connected one carries the constraint.
+    """
+    hessian = rng.normal(size=(n, n)) * (np.abs(np.subtract.outer(range(n), range(n))) <= 2)
+    hessian = hessian @ hessian.T + 0.1 * np.eye(n)
+    jacobian = np.zeros((m, n))
+    for row in range(m):
+        columns = range(row, min(row + 3, n))
+        jacobian[row, list(columns)] = rng.normal(size=len(columns)) + 2.0
+    if weak_entry is not None:
+        lonely = n - 1  # in no other constraint's row and only two Hessian neighbours away
+        hessian[lonely, :] = hessian[:, lonely] = 0.0
+        hessian[lonely, lonely] = 1.0
+        jacobian[:, lonely] = 0.0
+        jacobian[0, lonely] = weak_entry
+    return np.block([[hessian, jacobian.T], [jacobian, np.zeros((m, m))]])
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_factorization_reports_the_inertia_and_solves_like_numpy(library, seed):
+    rng = np.random.default_rng(seed)
+    n, m = 40, 25
+    matrix = kkt_matrix(rng, n, m)
+    rhs = rng.normal(size=n + m)
+    negative, solution, flag = factorize_and_solve(library, matrix, rhs)
+    eigenvalues = np.linalg.eigvalsh(matrix)
+    assert flag == 0 and negative == int(np.sum(eigenvalues < 0)) == m
+    assert backward_error(matrix, solution, rhs) < RESIDUAL_RATIO_MAX
+
+
+def test_a_pair_on_a_near_zero_jacobian_entry_is_paired_again_by_value(library):
+    """Constraint 0 reaches a variable (least connected, so structurally preferred) through a 1e-13 entry only.
+
+    With stop 21's structural pairs (``BLOCK_LDL_STRUCTURAL_PAIRS=1``) this reports 26 negative eigenvalues for 25.
+    """
+    rng = np.random.default_rng(11)
+    matrix = kkt_matrix(rng, 40, 25, weak_entry=1e-13)
+    rhs = rng.normal(size=65)
+    negative, solution, flag = factorize_and_solve(library, matrix, rhs)
+    assert flag == 0 and negative == int(np.sum(np.linalg.eigvalsh(matrix) < 0)) == 25
+    assert backward_error(matrix, solution, rhs) < RESIDUAL_RATIO_MAX
+
+
+def test_the_library_is_built_once_and_a_damaged_one_is_built_again(tmp_path):
+    settings = CodegenSettings(cache_dir=str(tmp_path))
+    path = block_ldl_library(settings)
+    assert path == block_ldl_library_path(settings) and library_intact(path)
+    built = path.stat().st_mtime_ns
+    assert block_ldl_library(settings) == path and path.stat().st_mtime_ns == built  # reused, not rebuilt
+    path.write_bytes(path.read_bytes()[:4096])  # truncated: loading it could crash the process
+    assert not library_intact(path)
+    assert block_ldl_library(settings) == path and library_intact(path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [path.name, path.name + ".sha256"]  # no leftovers
+
+
+def test_without_a_compiler_ipopt_keeps_mumps_and_says_why(tmp_path, caplog):
+    settings = CodegenSettings(cache_dir=str(tmp_path), compiler=str(tmp_path / "no-such-cc"))
+    options, description = linear_solver_options(settings)
+    assert options == {} and description.startswith("MUMPS (block LDL^T unavailable") and "no-such-cc" in description
+    assert "IPOPT uses MUMPS" in caplog.text
+    assert linear_solver_options(dataclasses.replace(settings, linear_solver="mumps")) == ({}, "MUMPS")
+    with pytest.raises(ValueError, match="linear solver must be one of"):
+        CodegenSettings(linear_solver="ma57")
+
+
+@pytest.mark.parametrize("method", ["flyable", "verified"])
+def test_plans_with_the_block_ldl_match_mumps(method, tmp_path):
+    """Status, replay verdict and value of cold and warm plans across the plane, as the planner makes them."""
+    airframe = load_airframe("uh60a_class")
+    settings = load_settings(method=method)
+    codegen = CodegenSettings(mode="off", cache_dir=str(tmp_path))
+    block_ldl = LandingPlanner(airframe, settings, codegen)
+    mumps = LandingPlanner(airframe, settings, dataclasses.replace(codegen, linear_solver="mumps"))
+    assert block_ldl.linear_solver.startswith("block LDL^T") and mumps.linear_solver == "MUMPS"
+    for height_ft, speed_kt in ((500, 75), (150, 0), (40, 60), (300, 110), (800, 20), (60, 10)):
+        state = initial_state_after_failure(airframe, height_ft * FT, speed_kt * KT)
+        nearby = initial_state_after_failure(airframe, (height_ft + 10) * FT, (speed_kt + 2.5) * KT)
+        reference, plan = mumps.plan(state), block_ldl.plan(state)
+        assert (plan.status, plan.verified) == (reference.status, reference.verified), (height_ft, speed_kt)
+        assert plan.value == pytest.approx(reference.value, abs=1e-5)
+        warm_reference = mumps.plan(nearby, warm_start=reference.warm_start)
+        warm = block_ldl.plan(nearby, warm_start=plan.warm_start)
+        assert (warm.status, warm.verified) == (warm_reference.status, warm_reference.verified), (height_ft, speed_kt)
+        assert warm.value == pytest.approx(warm_reference.value, abs=1e-5)
+
+
+def test_a_solve_does_not_depend_on_the_solves_before_it(tmp_path):
+    """The pairs one solve chose by value are not carried into the next (IPOPT reuses its MA27 workspace)."""
+    airframe = load_airframe("uh60a_class")
+    planner = LandingPlanner(airframe, load_settings(), CodegenSettings(mode="off", cache_dir=str(tmp_path)))
+    state = initial_state_after_failure(airframe, 500 * FT, 75 * KT)
+    first = planner.plan(state)
+    for height_ft, speed_kt in ((40, 60), (150, 0), (300, 110)):  # other solves in between, cold and warm
+        other = planner.plan(initial_state_after_failure(airframe, height_ft * FT, speed_kt * KT))
+        planner.plan(initial_state_after_failure(airframe, (height_ft + 10) * FT, speed_kt * KT), other.warm_start)
+    again = planner.plan(state)
+    assert again.solver.iterations == first.solver.iterations and again.value == first.value
+    assert np.array_equal(again.warm_start.primal, first.warm_start.primal)
