@@ -666,6 +666,8 @@ def _plan_sizes(solutions: Iterable[_Solution]) -> dict[str, tuple[int, ...]]:
 def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, str] | None) -> dict[str, Any]:
     import casadi
 
+    from helireach_ros.core.compiled_nlp import CodegenSettings
+
     airframe = job.airframe.as_dict() | {"digest": job.airframe.digest()}
     grid = dict(grid_spec or {}, heights_count=len(job.heights), speeds_count=len(job.speeds))
     domain = ValidityDomain(climb_rates=(job.climb_rate,) if job.climb_rates is None else tuple(job.climb_rates))
@@ -714,6 +716,8 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
         },
         "software": {
             "helireach_ros": __version__,
+            # requested: a worker without a C compiler solves with MUMPS (the answers agree; README, issue 13)
+            "linear_solver": (job.codegen or CodegenSettings.from_environment()).linear_solver,
             "casadi": casadi.__version__,
             "numpy": np.__version__,
             "python": platform.python_version(),
