@@ -457,6 +457,8 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
         repairs++;
         have = 0; /* the structure below is built again from this code */
     } else if (!have) {
+        int need_i = ints_needed(n, nz, b, lnz);
+        if (*liw < need_i) { info[0] = -3; info[1] = need_i; return; } /* before code is written into iw */
         memcpy(code, ikeep, n * sizeof(fint));
     }
     int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
