@@ -150,8 +150,14 @@ def test_every_node_killed_mid_descent_recovers_and_the_log_is_recoverable(local
 
         assert observer.spin_until(planned_after_restart, START_TIMEOUT_S)
         replanned_at, values = next((t, v) for t, v in observer.plans if t > killed_at and "state_stamp_ns" in v)
-        latest_state = max(stamp for t, stamp in observer.states if t <= replanned_at)
-        assert int(values["state_stamp_ns"]) >= latest_state - int(0.5e9), "the new plan is not from the current state"
+        # The reference is the newest state when the new planner process started, not when its status reached this
+        # observer: the restarted publisher must be discovered first, and its latched status then arrives late.
+        # Measured: a fallback published 0.2 s after its state reached this process 1.7 s later (flaky 2 of 4 runs).
+        latest_state = max(stamp for t, stamp in observer.states if t <= planner.started_at)
+        assert int(values["state_stamp_ns"]) >= latest_state - int(0.5e9), (
+            "the new plan is not from a state after the restart",
+            (int(values["state_stamp_ns"]) - latest_state) * 1e-9,
+        )
         recoveries["planner (restart -> plan)"] = replanned_at - planner.started_at
 
         # Monitor: killed, the state stops; started again, the status is fresh within 2 s of the first state.

@@ -73,6 +73,26 @@ def test_a_removed_node_leaves_the_order_and_is_not_served(context) -> None:
             node.destroy_node()
 
 
+def test_an_executor_built_on_a_context_already_shut_down_raises_and_leaves_no_unraisable_error(monkeypatch) -> None:
+    """A stop signal can shut the context down while a node script builds its executor: rclpy's constructor then
+    raises before setting ``_sigint_gc``, and its ``__del__`` printed an "Exception ignored ... AttributeError"."""
+    import gc
+    import sys
+
+    import rclpy
+    from rclpy.context import Context
+
+    unraisable: list[BaseException | None] = []
+    monkeypatch.setattr(sys, "unraisablehook", lambda report: unraisable.append(report.exc_value))
+    stopped = Context()
+    rclpy.init(context=stopped)
+    stopped.shutdown()
+    with pytest.raises(RuntimeError):
+        AddedOrderExecutor(context=stopped)
+    gc.collect()
+    assert unraisable == []
+
+
 def test_fast_log_lines_reach_rosout_with_their_caller(context) -> None:
     node = Node("fast_logging_test", context=context)
     listener = Node("rosout_listener", context=context)

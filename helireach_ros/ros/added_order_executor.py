@@ -22,6 +22,11 @@ __all__ = ["AddedOrderExecutor"]
 class AddedOrderExecutor(SingleThreadedExecutor):
     """``SingleThreadedExecutor`` whose ``get_nodes`` (and so its service order) is the order of ``add_node``."""
 
+    # rclpy's Executor.__del__ reads this even when __init__ stopped before setting it (a stop signal that shuts the
+    # context down while the executor is built makes its guard condition raise): without the default it printed an
+    # "Exception ignored ... AttributeError" traceback on such a stop.
+    _sigint_gc = None
+
     def __init__(self, *, context: object | None = None) -> None:
         self._added: list[Node] = []
         self._added_lock = threading.RLock()  # re-entered: add_node sets node.executor, which calls add_node
