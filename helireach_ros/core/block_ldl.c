@@ -17,7 +17,7 @@
  * perturbed and reported as rank deficient (MA27's warning 3), so IPOPT regularises and factorizes again.
  *
  * Debug switches (environment): BLOCK_LDL_VERBOSE, BLOCK_LDL_TIMES (a summary at exit), BLOCK_LDL_DUMPDIR (the
- * first 400 KKT matrices as text, for bench/prototypes/ldl27_compare.py --check-inertia), BLOCK_LDL_QUIET_PERTURB,
+ * first 400 KKT matrices as text, for bench/linear_solver_compare.py --check-inertia), BLOCK_LDL_QUIET_PERTURB,
  * BLOCK_LDL_STRUCTURAL_PAIRS (stop 21's structural pairs, for comparison).
  */
 #include <math.h>
@@ -34,8 +34,6 @@ __attribute__((destructor)) static void report(void) { if (getenv("BLOCK_LDL_TIM
 typedef int fint;
 #define MAGIC 0x4c444c32
 #define HEADER 8
-
-typedef struct { double m[4]; } blk; /* row-major 2x2 */
 
 static inline void mul(const double *a, const double *b, double *c) { /* c = a b */
     c[0] = a[0] * b[0] + a[1] * b[2];
@@ -62,7 +60,7 @@ static int verbose(void) { return getenv("BLOCK_LDL_VERBOSE") != NULL; }
 /* ---------------------------------------------------------------- analysis */
 /* Analyses by structure: IPOPT analyses again at every solve, of the same matrix structure. */
 #define CACHE_SLOTS 16
-typedef struct { int n, nz; uint64_t hash; int *code; int b, lnz, m0, stamp; long used; } analysis;
+typedef struct { int n, nz; uint64_t hash; int *code; int b, lnz, m0; long used; } analysis;
 static analysis cache[CACHE_SLOTS];
 static long cache_clock = 0;
 static pthread_mutex_t cache_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -83,7 +81,7 @@ static int cache_get(int n, int nz, uint64_t hash, fint *ikeep) {
         analysis *e = &cache[s];
         if (e->code && e->n == n && e->nz == nz && e->hash == hash) {
             memcpy(ikeep, e->code, n * sizeof(fint));
-            ikeep[n] = MAGIC; ikeep[n + 1] = e->b; ikeep[n + 2] = e->lnz; ikeep[n + 3] = e->m0; ikeep[n + 4] = e->stamp;
+            ikeep[n] = MAGIC; ikeep[n + 1] = e->b; ikeep[n + 2] = e->lnz; ikeep[n + 3] = e->m0;
             e->used = ++cache_clock;
             found = 1;
             break;
@@ -105,13 +103,13 @@ static void cache_put(int n, int nz, uint64_t hash, const fint *ikeep) {
     e->code = malloc(n * sizeof(int));
     memcpy(e->code, ikeep, n * sizeof(int));
     e->n = n; e->nz = nz; e->hash = hash;
-    e->b = ikeep[n + 1]; e->lnz = ikeep[n + 2]; e->m0 = ikeep[n + 3]; e->stamp = ikeep[n + 4];
+    e->b = ikeep[n + 1]; e->lnz = ikeep[n + 2]; e->m0 = ikeep[n + 3];
     e->used = ++cache_clock;
     pthread_mutex_unlock(&cache_lock);
 }
 
 typedef struct {
-    int n, nz, m0, blocks, unmatched;
+    int n, nz, m0, unmatched;
     int *adjp, *adji; /* deduplicated symmetric adjacency of nodes, no diagonal */
     double *adjx;     /* |a| of each adjacency entry (values known), or NULL (structure only) */
     int *mate;        /* multiplier -> primal and primal -> multiplier, -1 if none */
@@ -308,7 +306,7 @@ static int ints_needed(int n, int nz, int b, int lnz) {
  * (a != NULL) a pair needs an entry of at least tau times its multiplier's largest one where any pairing allows. */
 static void analyse(int n, int nz, const fint *irn, const fint *icn, const double *a, double tau, fint *code,
                     int *b_out, int *lnz_out, int *m0_out, int *unmatched_out, double *flops_out) {
-    graph g = {n, nz, n, 0, 0, NULL, NULL, NULL, NULL, tau};
+    graph g = {n, nz, n, 0, NULL, NULL, NULL, NULL, tau};
     build_graph(&g, irn, icn, a);
     /* the trailing independent block: every node from m0 on has no neighbour after it */
     int m0 = n;
@@ -370,10 +368,10 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     for (int t = 0; t < nz; t++)
         if (irn[t] < 1 || irn[t] > n || icn[t] < 1 || icn[t] > n) { info[0] = -1; info[1] = t + 1; return; }
     uint64_t hash = structure_hash(nz, irn, icn);
+    /* a fresh stamp for every analysis: a solve starts from the analysis's pairs, never from pairs an earlier solve
+     * left in a workspace IPOPT reuses, so a solve's answer does not depend on the solves before it */
+    ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
     if (n >= 8 && cache_get(n, nz, hash, ikeep)) {
-        /* a fresh stamp: this solve starts from the analysis's pairs, not from pairs an earlier solve left in a
-         * workspace IPOPT reuses, so a solve's answer never depends on the solves before it */
-        ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
         int b = ikeep[n + 1], lnz = ikeep[n + 2];
         *nsteps = 1;
         *ops = 0;
@@ -385,7 +383,6 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     double flops;
     analyse(n, nz, irn, icn, NULL, 0.0, ikeep, &b, &lnz, &m0, &unmatched, &flops);
     ikeep[n] = MAGIC; ikeep[n + 1] = b; ikeep[n + 2] = lnz; ikeep[n + 3] = m0;
-    ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
     *nsteps = 1;
     *ops = flops;
     /* room for a value-based pairing's extra fill (ma27bd asks for more if even that is short) */
@@ -441,29 +438,27 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     int have = hdr[0] == MAGIC && hdr[5] == stamp && hdr[1] == n && hdr[4] == nz;
     const fint *pairs = have ? code : ikeep;
     int b = have ? hdr[2] : ikeep[n + 1], lnz = have ? hdr[3] : ikeep[n + 2];
+    fint *fresh = NULL;
     if (!getenv("BLOCK_LDL_STRUCTURAL_PAIRS") && weak_pair(n, nz, irn, icn, a, pairs, b, have ? PAIR_KEEP : PAIR_TAU)) {
         int m0, unmatched;
         double flops;
-        fint *fresh = malloc(n * sizeof(fint));
+        fresh = malloc(n * sizeof(fint));
         analyse(n, nz, irn, icn, a, PAIR_TAU, fresh, &b, &lnz, &m0, &unmatched, &flops);
-        int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
-        if (*liw < need_i || *la < need_r) {
-            free(fresh);
-            if (*liw < need_i) { info[0] = -3; info[1] = need_i; } else { info[0] = -4; info[1] = need_r; }
-            return;
-        }
+    }
+    int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
+    if (*liw < need_i || *la < need_r) { /* checked before anything is written into iw */
+        free(fresh);
+        if (*liw < need_i) { info[0] = -3; info[1] = need_i; } else { info[0] = -4; info[1] = need_r; }
+        return;
+    }
+    if (fresh) {
         memcpy(code, fresh, n * sizeof(fint));
         free(fresh);
         repairs++;
-        have = 0; /* the structure below is built again from this code */
+        have = 0; /* the structure below is built again from these pairs */
     } else if (!have) {
-        int need_i = ints_needed(n, nz, b, lnz);
-        if (*liw < need_i) { info[0] = -3; info[1] = need_i; return; } /* before code is written into iw */
         memcpy(code, ikeep, n * sizeof(fint));
     }
-    int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
-    if (*liw < need_i) { info[0] = -3; info[1] = need_i; return; }
-    if (*la < need_r) { info[0] = -4; info[1] = need_r; return; }
     fint *lp = code + n, *li = lp + b + 1, *parent = li + lnz, *lnzc = parent + b,
          *flag = lnzc + b, *pattern = flag + b, *cp = pattern + b, *ci = cp + b + 1, *cs = ci + nz, *pos = cs + nz;
     double *dinv = a + nz, *lx = dinv + 4 * b, *y = lx + 4 * lnz, *cx = y + 4 * b;
