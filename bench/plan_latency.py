@@ -73,7 +73,7 @@ def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str
     if settings.method == "paper":  # its NLP has no closed-form states
         return [
             ("before issue 13", before, plain),
-            ("warm options, plain functions", settings, with_mumps(plain)),
+            ("warm options, plain functions", settings, plain),
             ("warm options, compiled, MUMPS", settings, with_mumps(current[2])),
             current,
         ]
