@@ -18,6 +18,7 @@ from typing import Any
 import yaml
 
 from helireach_ros.core.airframe_plausibility import warn_if_implausible
+from helireach_ros.core.inflow import PAPER_ROTOR_MODEL, InflowModel, RotorModel
 from helireach_ros.core.resources import config_path
 from helireach_ros.core.units import UnitError, convert_to_si
 
@@ -115,6 +116,8 @@ class Airframe:
         limits: the landing and path limits.
         flyability: the attitude, rate and touchdown-attitude limits of flyable plans (the YAML's optional
             ``flyability`` section; the :class:`FlyabilityLimits` defaults, all assumed, where it is missing).
+        rotor_model: the rotor's aerodynamics (inflow, ground effect, induced and profile power; the YAML's
+            ``rotor_model`` section; where it is missing, the paper's rotor, which the file was written for).
         sources: where each number came from (not part of equality or the hash).
     """
 
@@ -133,6 +136,7 @@ class Airframe:
     gravity: float
     limits: LandingLimits
     flyability: FlyabilityLimits = FlyabilityLimits()
+    rotor_model: RotorModel = PAPER_ROTOR_MODEL
     sources: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     @property
@@ -171,10 +175,25 @@ class Airframe:
             changes["density_altitude"] = float(density_altitude)
         return dataclasses.replace(self, **changes)
 
+    def with_rotor_model(self, rotor_model: RotorModel) -> Airframe:
+        """Returns a copy with another rotor model (e.g. :meth:`paper_model` for the paper's)."""
+        return dataclasses.replace(self, rotor_model=rotor_model)
+
+    def paper_model(self) -> Airframe:
+        """This airframe with the paper's rotor model (hover inflow, no ground effect): the ``paper`` method's."""
+        hub_height = self.rotor_model.hub_height
+        return self.with_rotor_model(dataclasses.replace(PAPER_ROTOR_MODEL, hub_height=hub_height))
+
     def as_dict(self) -> dict[str, Any]:
-        """All parameters in SI (plus the derived air density and mass), JSON-serialisable."""
+        """All parameters in SI (plus the derived air density and mass), JSON-serialisable.
+
+        The rotor model is left out when it is the paper's, so an airframe written before the rotor model existed
+        keeps its digest (and the envelopes computed for it stay valid).
+        """
         data = dataclasses.asdict(self)
         data.pop("sources")
+        if self.rotor_model.is_paper:
+            data.pop("rotor_model")
         data["air_density"] = self.air_density
         data["mass"] = self.mass
         return data
@@ -301,7 +320,7 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
     """
     if not isinstance(document, dict):
         raise ConfigError(f"{where}an airframe file must be a mapping with name, parameters, limits")
-    allowed = {"name", "description", "parameters", "limits", "flyability"}
+    allowed = {"name", "description", "parameters", "limits", "flyability", "rotor_model"}
     unknown = sorted(set(document) - allowed)
     if unknown:
         raise ConfigError(f"{where}unknown top-level key(s): {', '.join(unknown)}")
@@ -328,13 +347,61 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
         )
     if max(flyability_limits.max_nose_up_pitch, flyability_limits.max_nose_down_pitch) > limits["max_pitch_angle"]:
         raise ConfigError(f"{where}flyability: the pitch limits must lie inside limits.max_pitch_angle")
+    rotor_model, rotor_sources = _parse_rotor_model(document.get("rotor_model"), where)
     return Airframe(
         name=str(document["name"]),
         limits=LandingLimits(**limits),
         flyability=flyability_limits,
-        sources=tuple(parameter_sources + limit_sources + flyability_sources),
+        rotor_model=rotor_model,
+        sources=tuple(parameter_sources + limit_sources + flyability_sources + rotor_sources),
         **parameters,
     )
+
+
+_ROTOR_MODEL_SCHEMA: dict[str, tuple[str, float, float]] = {
+    "induced_power_factor": ("dimensionless", 1.0, 2.0),
+    "profile_power_speed_factor": ("dimensionless", 0.0, 10.0),
+    "hub_height": ("length", 0.1, 20.0),
+}
+_SWITCHES = {True: True, False: False, "on": True, "off": False}
+
+
+def _parse_rotor_model(section: Any, where: str) -> tuple[RotorModel, list[tuple[str, str]]]:
+    """The ``rotor_model`` section: ``inflow`` (momentum | paper_hover), ``ground_effect`` (on | off) and the
+    numbers of :data:`_ROTOR_MODEL_SCHEMA` as ``{value, unit, source}``."""
+    if section is None:  # airframe files older than the rotor model keep the model they were written for
+        return PAPER_ROTOR_MODEL, [
+            ("rotor_model.inflow", "paper_hover: the airframe file has no rotor_model section"),
+            ("rotor_model.ground_effect", "off: the airframe file has no rotor_model section"),
+        ]
+    if not isinstance(section, dict):
+        raise ConfigError(f"{where}'rotor_model' must be a mapping")
+    switches = {"inflow", "ground_effect"}
+    unknown = sorted(set(section) - switches - set(_ROTOR_MODEL_SCHEMA))
+    if unknown:
+        raise ConfigError(f"{where}unknown key(s) in 'rotor_model': {', '.join(unknown)}")
+    inflow_name = section.get("inflow", InflowModel.MOMENTUM.value)
+    try:
+        inflow = InflowModel(inflow_name)
+    except ValueError:
+        choices = " | ".join(model.value for model in InflowModel)
+        raise ConfigError(f"{where}rotor_model.inflow must be {choices}, got {inflow_name!r}") from None
+    ground_effect = section.get("ground_effect", "on")
+    if isinstance(ground_effect, str):
+        ground_effect = ground_effect.lower()
+    if ground_effect not in _SWITCHES:
+        raise ConfigError(f"{where}rotor_model.ground_effect must be on | off, got {ground_effect!r}")
+    numbers = {key: section[key] for key in _ROTOR_MODEL_SCHEMA if key in section}
+    required = ["induced_power_factor", "profile_power_speed_factor"]
+    if _SWITCHES[ground_effect]:
+        required.append("hub_height")
+    missing = [key for key in required if key not in numbers]
+    if missing:
+        raise ConfigError(f"{where}missing key(s) in 'rotor_model': {', '.join(missing)}")
+    schema = {key: _ROTOR_MODEL_SCHEMA[key] for key in numbers}
+    values, sources = _parse_section(numbers, schema, "rotor_model", where)
+    sources = [("rotor_model.inflow", inflow.value), ("rotor_model.ground_effect", str(ground_effect)), *sources]
+    return RotorModel(inflow=inflow, ground_effect=_SWITCHES[ground_effect], **values), sources
 
 
 def load_airframe(name_or_path: str | Path) -> Airframe:

@@ -1,4 +1,4 @@
-"""The paper's six-state helicopter model after power loss (Lee 1985; Kirchner et al. 2020, eq. 13).
+"""The six-state helicopter model after power loss (Lee 1985; Kirchner et al. 2020, eq. 13), with a rotor model.
 
 State x = (y, v, Ω, h, z, P): descent rate y (m/s, positive down), forward speed v (m/s), rotor
 speed Ω (rad/s), height above ground h (m), distance z (m), engine power P (W).
@@ -10,7 +10,8 @@ Control u = (C_T, θ): thrust coefficient and pitch angle (rad, positive nose do
     \\dot v &= \\frac{\\rho}{m} A (\\Omega R)^2 C_T \\sin\\theta - \\tfrac12 \\frac{\\rho}{m} f_{ez} V_f v \\\\
     \\dot\\Omega &= \\frac{1}{I_R \\Omega}\\Big(P - \\frac{1}{\\eta} \\rho A (\\Omega R)^3 C_P\\Big), \\quad
         C_P = \\tfrac18 \\sigma c_d + C_T \\lambda, \\quad
-        \\lambda = \\frac{v\\sin\\theta - y\\cos\\theta + \\nu}{\\Omega R}, \\quad \\nu = \\Omega R \\sqrt{C_T/2} \\\\
+        \\lambda = \\frac{v\\sin\\theta - y\\cos\\theta + \\nu}{\\Omega R}, \\quad \\nu = \\Omega R \\sqrt{C_T/2}
+        \\ \\text{(the paper's rotor; the default rotor model below)} \\\\
     \\dot h &= -y, \\quad \\dot z = v, \\quad \\dot P = -P/\\kappa
 
 Deviations from the paper, on purpose:
@@ -19,8 +20,12 @@ Deviations from the paper, on purpose:
 * √C_T, 1/Ω and V_f = √(y² + v²) use smooth guarded forms (below) so the NLP has finite
   derivatives at C_T = 0, Ω → 0 and V_f = 0; the guards change values by < 1e-6 relative in the
   flight envelope;
-* the induced velocity is the paper's hover value at all speeds (kept; the advance velocity U_T,
-  defined in the paper but unused, stays unused).
+* the rotor's aerodynamics are the airframe's :class:`~helireach_ros.core.inflow.RotorModel`: by default
+  momentum-theory induced velocity in forward flight, climb and descent with an empirical vortex-ring bridge,
+  ground effect, an induced power factor and profile power that grows with the advance ratio
+  (:mod:`~helireach_ros.core.inflow`, :func:`_rotor_terms`). The paper's hover induced velocity at every speed
+  (its U_T defined but unused) is :data:`~helireach_ros.core.inflow.PAPER_ROTOR_MODEL`, which the ``paper``
+  method uses.
 """
 
 from __future__ import annotations
@@ -35,12 +40,14 @@ import casadi as ca
 import numpy as np
 
 from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.inflow import induced_velocity
 
 __all__ = [
     "CONTROL_NAMES",
     "DISTURBANCE_NAMES",
     "DISTURBANCE_UNITS",
     "NO_DISTURBANCE",
+    "OUT_OF_GROUND_EFFECT",
     "STATE_NAMES",
     "STATE_UNITS",
     "HelicopterState",
@@ -131,20 +138,47 @@ class HelicopterState:
 
 
 def _rotor_terms(airframe: Airframe, state, control):
-    """Thrust per unit mass and rotor power required (shared by dynamics and trim)."""
-    y, v, rotor_speed = state[0], state[1], state[2]
+    """Thrust per unit mass and rotor power required (shared by dynamics and trim).
+
+    With U_P = v sinθ − y cosθ the air speed down through the disk and U_T = v cosθ + y sinθ the one in its plane,
+    ν the induced velocity of :mod:`~helireach_ros.core.inflow`, κ the induced power factor and K the profile
+    power's speed factor (:class:`~helireach_ros.core.inflow.RotorModel`):
+
+    .. math:: C_P = \\tfrac18 \\sigma c_d (1 + K \\mu^2) + C_T \\frac{U_P + \\kappa \\nu}{\\Omega R},
+        \\quad \\mu = \\frac{U_T}{\\Omega R}.
+
+    The paper's model (κ = 1, K = 0, ν = ΩR √(C_T/2)) is built as the paper writes it.
+    """
+    y, v, rotor_speed, height = state[0], state[1], state[2], state[3]
     thrust_coefficient, pitch = control[0], control[1]
+    rotor_model = airframe.rotor_model
     density = airframe.air_density
     tip_speed = rotor_speed * airframe.rotor_radius
     thrust_per_mass = density / airframe.mass * airframe.disk_area * tip_speed**2 * thrust_coefficient
-    induced_velocity = tip_speed * ca.sqrt(smooth_positive(thrust_coefficient, _THRUST_GUARD) / 2.0)
+    hover_induced_velocity = tip_speed * ca.sqrt(smooth_positive(thrust_coefficient, _THRUST_GUARD) / 2.0)
     guarded_tip_speed = smooth_positive(rotor_speed, _ROTOR_GUARD_RATIO * airframe.nominal_rotor_speed) * (
         airframe.rotor_radius
     )
-    inflow_ratio = (v * ca.sin(pitch) - y * ca.cos(pitch) + induced_velocity) / guarded_tip_speed
-    power_coefficient = airframe.rotor_solidity * airframe.blade_drag_coefficient / 8.0 + thrust_coefficient * (
-        inflow_ratio
-    )
+    axial_speed = v * ca.sin(pitch) - y * ca.cos(pitch)
+    profile = airframe.rotor_solidity * airframe.blade_drag_coefficient / 8.0
+    if rotor_model.is_paper:
+        inflow_ratio = (axial_speed + hover_induced_velocity) / guarded_tip_speed
+        power_coefficient = profile + thrust_coefficient * inflow_ratio
+    else:
+        edgewise_speed = v * ca.cos(pitch) + y * ca.sin(pitch)
+        induced = induced_velocity(
+            rotor_model,
+            hover_induced_velocity=hover_induced_velocity,
+            edgewise_speed=edgewise_speed,
+            axial_speed=axial_speed,
+            height=height,
+            rotor_radius=airframe.rotor_radius,
+        )
+        advance_ratio = edgewise_speed / guarded_tip_speed
+        induced_power_factor = rotor_model.effective_induced_power_factor
+        power_coefficient = profile * (1.0 + rotor_model.effective_profile_power_speed_factor * advance_ratio**2) + (
+            thrust_coefficient * (axial_speed + induced_power_factor * induced) / guarded_tip_speed
+        )
     rotor_power = density * airframe.disk_area * tip_speed**3 * power_coefficient / airframe.rotor_power_efficiency
     return thrust_per_mass, rotor_power
 
@@ -220,7 +254,14 @@ class TrimCondition:
     climb_rate: float = 0.0
 
 
-def trim_flight(airframe: Airframe, forward_speed: float, climb_rate: float = 0.0) -> TrimCondition:
+OUT_OF_GROUND_EFFECT = 1.0e3
+"""m: a height at which the ground effect is negligible (k_G − 1 < 1e-4 for rotors up to 20 m): trims and steady
+autorotations are computed there unless a height is given."""
+
+
+def trim_flight(
+    airframe: Airframe, forward_speed: float, climb_rate: float = 0.0, height: float = OUT_OF_GROUND_EFFECT
+) -> TrimCondition:
     """Trims steady flight (ẏ = v̇ = Ω̇ = 0, Ω = Ω₀) at a forward speed and climb rate.
 
     With y = −climb_rate and D = ½ρ V_f the drag per unit speed and area (V_f = √(y² + v²), guarded as
@@ -229,7 +270,8 @@ def trim_flight(airframe: Airframe, forward_speed: float, climb_rate: float = 0.
 
     .. math:: T\\cos\theta = W - D f_{eh}\\,y, \\qquad T\\sin\theta = D f_{ez}\\,v,
 
-    and the engine supplies the rotor power that holds Ω₀ (:func:`dynamics_function`'s Ω̇ = 0).
+    and the engine supplies the rotor power that holds Ω₀ (:func:`dynamics_function`'s Ω̇ = 0) at ``height`` (m; the
+    ground effect lowers the power near the ground, not the thrust and pitch).
 
     Raises:
         ValueError: a negative or non-finite speed, a non-finite climb rate, a trim needing C_T above the
@@ -255,7 +297,7 @@ def trim_flight(airframe: Airframe, forward_speed: float, climb_rate: float = 0.
             f"flight at {forward_speed:.1f} m/s, climb {climb_rate:.1f} m/s needs C_T = {thrust_coefficient:.4f}, "
             f"above the stall limit {airframe.max_thrust_coefficient:.4f}"
         )
-    state = [descent_rate, forward_speed, airframe.nominal_rotor_speed, 0.0, 0.0, 0.0]
+    state = [descent_rate, forward_speed, airframe.nominal_rotor_speed, float(height), 0.0, 0.0]
     _, rotor_power = _rotor_terms(airframe, state, [thrust_coefficient, pitch])
     if float(rotor_power) < 0.0:
         raise ValueError(
@@ -265,9 +307,11 @@ def trim_flight(airframe: Airframe, forward_speed: float, climb_rate: float = 0.
     return TrimCondition(forward_speed, thrust_coefficient, pitch, float(rotor_power), float(climb_rate))
 
 
-def trim_level_flight(airframe: Airframe, forward_speed: float) -> TrimCondition:
+def trim_level_flight(
+    airframe: Airframe, forward_speed: float, height: float = OUT_OF_GROUND_EFFECT
+) -> TrimCondition:
     """Trims level flight (y = 0): :func:`trim_flight` at zero climb rate."""
-    return trim_flight(airframe, forward_speed, 0.0)
+    return trim_flight(airframe, forward_speed, 0.0, height)
 
 
 def trim_controls(airframe: Airframe, state) -> np.ndarray:
@@ -311,7 +355,7 @@ def initial_state_after_failure(
         raise ValueError(f"height must be finite, got {height!r}")
     if rotor_speed is not None and not (np.isfinite(rotor_speed) and rotor_speed > 0.0):
         raise ValueError(f"rotor speed must be finite and > 0 rad/s, got {rotor_speed!r}")
-    trim = trim_flight(airframe, forward_speed, climb_rate)
+    trim = trim_flight(airframe, forward_speed, climb_rate, max(float(height), 0.0))
     omega = airframe.nominal_rotor_speed if rotor_speed is None else float(rotor_speed)
     return HelicopterState(-trim.climb_rate, forward_speed, omega, height, 0.0, power_fraction * trim.power)
 
@@ -351,14 +395,17 @@ def clip_rotor_speed_noise(airframe: Airframe, rotor_speed: float, tolerance_rat
     return rotor_speed
 
 
-def steady_autorotation(airframe: Airframe, forward_speed: float) -> tuple[float, float, float]:
-    """Finds the steady power-off descent (ẏ = v̇ = Ω̇ = 0 at Ω = Ω₀, P = 0) at a forward speed.
+def steady_autorotation(
+    airframe: Airframe, forward_speed: float, height: float = OUT_OF_GROUND_EFFECT
+) -> tuple[float, float, float]:
+    """Finds the steady power-off descent (ẏ = v̇ = Ω̇ = 0 at Ω = Ω₀, P = 0) at a forward speed (out of ground
+    effect unless a height in m is given).
 
     Returns:
         (descent rate y in m/s, thrust coefficient C_T, pitch angle θ in rad).
     """
     unknowns = ca.SX.sym("w", 3)  # y, C_T, θ
-    state = ca.vertcat(unknowns[0], forward_speed, airframe.nominal_rotor_speed, 0.0, 0.0, 0.0)
+    state = ca.vertcat(unknowns[0], forward_speed, airframe.nominal_rotor_speed, height, 0.0, 0.0)
     derivative = dynamics_function(airframe)(state, ca.vertcat(unknowns[1], unknowns[2]))
     residual = ca.Function("autorotation_residual", [unknowns], [derivative[:3]])
     solver = ca.rootfinder("steady_autorotation", "newton", residual, {"abstol": 1e-12})

@@ -231,10 +231,11 @@ class LandingPlanner:
     """Owns the NLP and solvers for one (airframe, settings); thread-safe, one solve at a time."""
 
     def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
-        self.airframe = airframe
+        # the paper's method reproduces the paper: its scheme and its rotor model, whatever the airframe file says
+        self.airframe = airframe.paper_model() if settings.method == "paper" else airframe
         self.settings = settings
         started = time.perf_counter()
-        self.transcription: Transcription = TRANSCRIPTIONS[settings.method](airframe, settings, codegen)
+        self.transcription: Transcription = TRANSCRIPTIONS[settings.method](self.airframe, settings, codegen)
         self.build_time_s = time.perf_counter() - started
         self._lock = threading.Lock()
         log.info(
