@@ -209,3 +209,14 @@ def test_rotor_model_section_is_parsed_and_checked():
     with pytest.raises(ConfigError, match="hub_height"):
         parse_airframe(_document({"ground_effect": "on", **numbers, "hub_height": {"value": 90, "unit": "m",
                                                                                     "source": "typo"}}))  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["uh60a_class", "oh58a_class", "s300c_class"])
+def test_shipped_airframes_give_the_momentum_rotor_a_sourced_hub_height(name):
+    airframe = load_airframe(name)
+    sources = dict(airframe.sources)
+    assert airframe.rotor_model.hub_height is not None and sources["rotor_model.hub_height"]
+    momentum = airframe.with_rotor_model_choice("momentum")
+    assert momentum.rotor_model.inflow is InflowModel.MOMENTUM and momentum.rotor_model.ground_effect
+    with pytest.raises(ConfigError, match="rotor model must be one of"):
+        airframe.with_rotor_model_choice("uniform")

@@ -107,3 +107,17 @@ def test_the_default_plan_is_flyable_and_the_delay_and_limits_are_reported():
     )
     assert not verified["flyability"]["within_limits"]  # the paper-limit plan: steps, 40 deg, ends above the ground
     assert "no ground contact" in verified["flyability"]["violations"]
+
+
+def test_the_rotor_model_is_selectable_and_the_paper_method_keeps_the_papers():
+    state = ("--airframe", "s300c_class", "--height-ft", "300", "--speed-kt", "40", "--json")
+    momentum = json.loads(_helireach("plan", *state, "--rotor-model", "momentum").stdout)
+    shipped = json.loads(_helireach("plan", *state).stdout)
+    assert momentum["airframe_digest"] != shipped["airframe_digest"]  # a different model, said so in the output
+    assert momentum["time_to_land_s"] != pytest.approx(shipped["time_to_land_s"], abs=1e-3)
+    paper = json.loads(_helireach("plan", *state, "--method", "paper", "--rotor-model", "momentum").stdout)
+    reference = json.loads(_helireach("plan", *state, "--method", "paper").stdout)
+    assert paper["value"] == pytest.approx(reference["value"], abs=1e-9)
+    assert paper["time_to_land_s"] == pytest.approx(reference["time_to_land_s"], abs=1e-9)
+    bad = _helireach("plan", "--height-ft", "300", "--speed-kt", "40", "--rotor-model", "uniform")
+    assert bad.returncode == 2 and "--rotor-model" in bad.stderr

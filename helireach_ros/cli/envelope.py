@@ -74,6 +74,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "holding one file per combination.",
     )
     compute.add_argument("--airframe", default="uh60a_class", help="airframe name or YAML path (default: %(default)s)")
+    compute.add_argument(
+        "--rotor-model",
+        choices=("airframe", "paper", "momentum"),
+        default="airframe",
+        help="rotor aerodynamics: the airframe file's, the paper's hover inflow, or momentum inflow with ground "
+        "effect (default: %(default)s)",
+    )
     compute.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
     compute.add_argument("--heights-ft", default="0:800:41", help="start:stop:count, inclusive (default: %(default)s)")
     compute.add_argument("--speeds-kt", default="0:120:25", help="start:stop:count, inclusive (default: %(default)s)")
@@ -178,7 +185,7 @@ def _compute(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.units import FT, KT, LBF
 
     try:
-        airframe = load_airframe(arguments.airframe)
+        airframe = load_airframe(arguments.airframe).with_rotor_model_choice(arguments.rotor_model)
         settings = load_settings(arguments.settings)
         overrides = {
             name: value

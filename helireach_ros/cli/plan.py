@@ -55,6 +55,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="s the pre-failure trim controls are held before the plan starts (default: config, 0)",
     )
     parser.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
+    parser.add_argument(
+        "--rotor-model",
+        choices=("airframe", "paper", "momentum"),
+        default="airframe",
+        help="rotor aerodynamics: the airframe file's, the paper's hover inflow, or momentum inflow with ground "
+        "effect (default: %(default)s; the paper method always uses the paper's)",
+    )
     parser.add_argument("--weight-lb", type=float, default=None, help="override the gross weight [lbf]")
     parser.add_argument("--density-altitude-ft", type=float, default=None, help="override the density altitude [ft]")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
@@ -70,7 +77,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.units import FT, KT, LBF
 
     try:
-        airframe = load_airframe(arguments.airframe).with_conditions(
+        airframe = load_airframe(arguments.airframe).with_rotor_model_choice(arguments.rotor_model).with_conditions(
             gross_weight=None if arguments.weight_lb is None else arguments.weight_lb * LBF,
             density_altitude=None if arguments.density_altitude_ft is None else arguments.density_altitude_ft * FT,
         )

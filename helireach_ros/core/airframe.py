@@ -23,6 +23,7 @@ from helireach_ros.core.resources import config_path
 from helireach_ros.core.units import UnitError, convert_to_si
 
 __all__ = [
+    "ROTOR_MODEL_CHOICES",
     "Airframe",
     "ConfigError",
     "FlyabilityLimits",
@@ -31,6 +32,9 @@ __all__ = [
     "load_airframe",
     "parse_airframe",
 ]
+
+ROTOR_MODEL_CHOICES = ("airframe", "paper", "momentum")
+"""Names a user may choose a rotor model by (:meth:`Airframe.with_rotor_model_choice`)."""
 
 SEA_LEVEL_DENSITY = 1.225
 """ISA sea-level air density, kg/m³."""
@@ -183,6 +187,25 @@ class Airframe:
         """This airframe with the paper's rotor model (hover inflow, no ground effect): the ``paper`` method's."""
         hub_height = self.rotor_model.hub_height
         return self.with_rotor_model(dataclasses.replace(PAPER_ROTOR_MODEL, hub_height=hub_height))
+
+    def with_rotor_model_choice(self, choice: str) -> Airframe:
+        """The airframe with the rotor model a user chose by name (:data:`ROTOR_MODEL_CHOICES`): ``airframe`` (its
+        file's), ``paper`` (the paper's rotor) or ``momentum`` (momentum inflow, with ground effect where the file
+        gives the hub height, and the file's factors).
+
+        Raises:
+            ConfigError: an unknown choice.
+        """
+        if choice == "airframe":
+            return self
+        if choice == "paper":
+            return self.paper_model()
+        if choice == "momentum":
+            model = self.rotor_model
+            return self.with_rotor_model(
+                dataclasses.replace(model, inflow=InflowModel.MOMENTUM, ground_effect=model.hub_height is not None)
+            )
+        raise ConfigError(f"rotor model must be one of {', '.join(ROTOR_MODEL_CHOICES)}, got {choice!r}")
 
     def as_dict(self) -> dict[str, Any]:
         """All parameters in SI (plus the derived air density and mass), JSON-serialisable.

@@ -111,6 +111,7 @@ class RotorModel:
     hub_height: float | None = None
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "inflow", InflowModel(self.inflow))  # a name given as text becomes the enum
         if self.ground_effect and self.hub_height is None:
             raise ValueError("ground effect needs the rotor hub height above the landing gear")
         if not 1.0 <= self.induced_power_factor <= 2.0:
