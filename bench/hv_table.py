@@ -52,7 +52,10 @@ def shape_row(path: str) -> dict[str, str]:
     heights_ft, speeds_kt = envelope.heights / FT, envelope.speeds / KT
     not_safe = np.asarray(envelope.status) != "safe"
     not_safe[0, :] = False  # the ground row: on the ground already
-    label = f"{settings.get('method', metadata.get('method'))}, delay {settings.get('reaction_delay_s', 0.0):g} s"
+    label = (
+        f"{envelope.airframe_name}, {envelope.rotor_model_text}, {settings.get('method', metadata.get('method'))}, "
+        f"delay {settings.get('reaction_delay_s', 0.0):g} s"
+    )
     row = {"file": path, "setting": label, "safe": f"{int(np.sum(~not_safe[1:]))}/{not_safe[1:].size}",
            "unsafe share": f"{100.0 * not_safe[1:].mean():.1f} %"}  # fmt: skip
     hover = np.flatnonzero(not_safe[:, 0])

@@ -436,6 +436,15 @@ class Envelope:
     def airframe_name(self) -> str:
         return str(self._metadata.get("airframe", {}).get("name", "unknown"))
 
+    @property
+    def rotor_model_text(self) -> str:
+        """The rotor model the envelope was computed with, in words ("paper rotor" when the airframe record has
+        none: the paper's rotor, or a file from before the rotor model existed)."""
+        rotor = self._metadata.get("airframe", {}).get("rotor_model")
+        if not rotor:
+            return "paper rotor"
+        return f"{rotor.get('inflow', '?')} rotor" + (", ground effect" if rotor.get("ground_effect") else "")
+
     # --- further read-only views ---------------------------------------------------------------
     @property
     def power_fraction(self) -> float:

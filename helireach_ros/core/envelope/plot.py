@@ -376,8 +376,8 @@ def overlay_labels(envelopes: list[Envelope], names: list[str] | None = None) ->
     """One legend label per envelope from its metadata.
 
     Always the method and the reaction delay (files made before the delay existed had none: 0 s) and, for a
-    climb slice, its climb rate; the airframe, weight, density altitude and power loss only where the files
-    differ. Labels that are still equal get the file name (``names``) or the envelope id.
+    climb slice, its climb rate; the airframe, rotor model, weight, density altitude and power loss only where the
+    files differ. Labels that are still equal get the file name (``names``) or the envelope id.
     """
 
     def delay(envelope: Envelope) -> float:
@@ -386,6 +386,7 @@ def overlay_labels(envelopes: list[Envelope], names: list[str] | None = None) ->
     facts = [
         {
             "airframe": envelope.airframe_name,
+            "rotor": envelope.rotor_model_text,
             "weight": f"W {_conditions(envelope)[0]:,.0f} lbf",
             "altitude": f"DA {_conditions(envelope)[1]:,.0f} ft",
             "power": _power_text(envelope.power_fraction),
