@@ -220,3 +220,25 @@ def test_shipped_airframes_give_the_momentum_rotor_a_sourced_hub_height(name):
     assert momentum.rotor_model.inflow is InflowModel.MOMENTUM and momentum.rotor_model.ground_effect
     with pytest.raises(ConfigError, match="rotor model must be one of"):
         airframe.with_rotor_model_choice("uniform")
+
+
+def test_the_roots_as_inputs_give_the_closed_form_dynamics():
+    """An NLP may carry the momentum roots as variables (model.implicit_inflow_functions): at the Newton roots the
+    residuals vanish and the dynamics equal the closed form; off them the residuals do not."""
+    from helireach_ros.core.model import disturbed_dynamics_function, implicit_inflow_functions
+
+    airframe = _momentum(load_airframe("oh58a_class"))
+    dynamics, residuals, roots = implicit_inflow_functions(airframe)
+    closed_form = disturbed_dynamics_function(airframe)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        state = [rng.uniform(-5, 25), rng.uniform(0, 60), rng.uniform(30, 42), rng.uniform(0, 100), 0.0, 0.0]
+        control = [rng.uniform(0.0005, 0.0058), rng.uniform(-0.4, 0.4)]
+        found = np.asarray(roots(state, control)).reshape(-1)
+        assert np.max(np.abs(np.asarray(residuals(state, control, found)))) < 1e-3
+        assert np.asarray(residuals(state, control, 1.2 * found)).max() > 1e-3
+        expected = np.asarray(closed_form(state, control, np.zeros(3))).reshape(-1)
+        actual = np.asarray(dynamics(state, control, np.zeros(3), found)).reshape(-1)
+        np.testing.assert_allclose(actual, expected, rtol=1e-9, atol=1e-9)
+    with pytest.raises(ValueError, match="paper's rotor"):
+        implicit_inflow_functions(airframe.paper_model())

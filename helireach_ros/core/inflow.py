@@ -76,7 +76,9 @@ __all__ = [
     "ground_effect_factor",
     "induced_velocity",
     "inflow_ratio",
+    "inflow_ratio_from_roots",
     "momentum_inflow_ratio",
+    "momentum_root_residual",
 ]
 
 
@@ -203,9 +205,33 @@ def momentum_inflow_ratio(edgewise_ratio, axial_ratio, steps: int = NEWTON_STEPS
 def inflow_ratio(edgewise_ratio, axial_ratio, steps: int = NEWTON_STEPS):
     """ν̂(μ̂, x) = ν̂_G(μ̂, x) · (ν̂_A(x) / ν̂_G(0, x))^w, w = exp(−μ̂⁴): the induced velocity over v_h out of ground
     effect (the module docstring)."""
+    return inflow_ratio_from_roots(
+        edgewise_ratio,
+        axial_ratio,
+        momentum_ratio=momentum_inflow_ratio(edgewise_ratio, axial_ratio, steps),
+        axial_momentum_ratio=momentum_inflow_ratio(0.0, axial_ratio, steps),
+    )
+
+
+def inflow_ratio_from_roots(edgewise_ratio, axial_ratio, *, momentum_ratio, axial_momentum_ratio):
+    """ν̂ from the momentum roots ν̂_G(μ̂, x) and ν̂_G(0, x), however they were found (Newton steps here, or an NLP
+    that carries them as variables with :func:`momentum_root_residual` as constraints)."""
     weight = ca.exp(-((edgewise_ratio / _VORTEX_RING_EDGEWISE) ** 4))
-    axial_excess = axial_inflow_ratio(axial_ratio) / momentum_inflow_ratio(0.0, axial_ratio, steps)
-    return momentum_inflow_ratio(edgewise_ratio, axial_ratio, steps) * ca.exp(weight * ca.log(axial_excess))
+    axial_excess = axial_inflow_ratio(axial_ratio) / axial_momentum_ratio
+    return momentum_ratio * ca.exp(weight * ca.log(axial_excess))
+
+
+def momentum_root_residual(root, *, hover_induced_velocity, edgewise_speed, axial_speed):
+    """The momentum equation with the raised edgewise speed in dimensional form, zero at the root (m²/s²):
+
+    .. math:: \\nu_G \\sqrt{U_T^2 + \\tfrac{5}{32}\\min(U_P, 0)^2 + (U_P + \\nu_G)^2} - v_h^2
+
+    (ν̂_G = ν_G / v_h solves :func:`momentum_inflow_ratio`'s equation; with ``edgewise_speed`` 0 it is ν̂_G(0, x)).
+    Well scaled as C_T → 0, where the normalised speeds grow without bound.
+    """
+    descent = 0.5 * (axial_speed - ca.sqrt(axial_speed**2 + (_GUARD * hover_induced_velocity) ** 2))
+    speed = ca.sqrt(edgewise_speed**2 + _RAISED_EDGEWISE * descent**2 + (axial_speed + root) ** 2)
+    return root * speed - hover_induced_velocity**2
 
 
 def ground_effect_factor(rotor_height_over_radius, edgewise_over_induced=0.0):
@@ -228,6 +254,7 @@ def induced_velocity(
     axial_speed,
     height,
     rotor_radius: float,
+    momentum_roots=None,
 ):
     """ν, m/s: the rotor's (ideal) induced velocity in any flight state.
 
@@ -238,12 +265,21 @@ def induced_velocity(
         axial_speed: U_P, the air speed through the disk, positive down through it (climb), m/s.
         height: of the landing gear above the ground, m.
         rotor_radius: R, m.
+        momentum_roots: (ν_G(U_T, U_P), ν_G(0, U_P)) in m/s, the roots of :func:`momentum_root_residual` (None: found
+            by Newton steps here).
     """
     if rotor_model.inflow is InflowModel.PAPER_HOVER:
         velocity = hover_induced_velocity
-    else:
+    elif momentum_roots is None:
         velocity = hover_induced_velocity * inflow_ratio(
             edgewise_speed / hover_induced_velocity, axial_speed / hover_induced_velocity
+        )
+    else:
+        velocity = hover_induced_velocity * inflow_ratio_from_roots(
+            edgewise_speed / hover_induced_velocity,
+            axial_speed / hover_induced_velocity,
+            momentum_ratio=momentum_roots[0] / hover_induced_velocity,
+            axial_momentum_ratio=momentum_roots[1] / hover_induced_velocity,
         )
     if rotor_model.ground_effect:
         assert rotor_model.hub_height is not None  # RotorModel checks it

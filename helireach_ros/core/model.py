@@ -40,7 +40,7 @@ import casadi as ca
 import numpy as np
 
 from helireach_ros.core.airframe import Airframe
-from helireach_ros.core.inflow import induced_velocity
+from helireach_ros.core.inflow import InflowModel, induced_velocity, momentum_inflow_ratio, momentum_root_residual
 
 __all__ = [
     "CONTROL_NAMES",
@@ -55,6 +55,7 @@ __all__ = [
     "clip_rotor_speed_noise",
     "disturbed_dynamics_function",
     "dynamics_function",
+    "implicit_inflow_functions",
     "initial_state_after_failure",
     "smooth_positive",
     "state_from_sensors",
@@ -137,7 +138,19 @@ class HelicopterState:
         return cls(*(float(component) for component in array))
 
 
-def _rotor_terms(airframe: Airframe, state, control):
+def _rotor_speeds(airframe: Airframe, state, control):
+    """v_h = ΩR √(C_T/2) (C_T guarded), U_T and U_P: what the induced velocity depends on, m/s."""
+    y, v, rotor_speed = state[0], state[1], state[2]
+    thrust_coefficient, pitch = control[0], control[1]
+    hover_induced_velocity = rotor_speed * airframe.rotor_radius * ca.sqrt(
+        smooth_positive(thrust_coefficient, _THRUST_GUARD) / 2.0
+    )
+    edgewise_speed = v * ca.cos(pitch) + y * ca.sin(pitch)
+    axial_speed = v * ca.sin(pitch) - y * ca.cos(pitch)
+    return hover_induced_velocity, edgewise_speed, axial_speed
+
+
+def _rotor_terms(airframe: Airframe, state, control, momentum_roots=None):
     """Thrust per unit mass and rotor power required (shared by dynamics and trim).
 
     With U_P = v sinθ − y cosθ the air speed down through the disk and U_T = v cosθ + y sinθ the one in its plane,
@@ -147,25 +160,28 @@ def _rotor_terms(airframe: Airframe, state, control):
     .. math:: C_P = \\tfrac18 \\sigma c_d (1 + K \\mu^2) + C_T \\frac{U_P + \\kappa \\nu}{\\Omega R},
         \\quad \\mu = \\frac{U_T}{\\Omega R}.
 
-    The paper's model (κ = 1, K = 0, ν = ΩR √(C_T/2)) is built as the paper writes it.
+    The paper's model (κ = 1, K = 0, ν = ΩR √(C_T/2)) is built as the paper writes it. ``momentum_roots``: see
+    :func:`~helireach_ros.core.inflow.induced_velocity`.
     """
-    y, v, rotor_speed, height = state[0], state[1], state[2], state[3]
-    thrust_coefficient, pitch = control[0], control[1]
+    rotor_speed, height = state[2], state[3]
+    thrust_coefficient = control[0]
     rotor_model = airframe.rotor_model
     density = airframe.air_density
     tip_speed = rotor_speed * airframe.rotor_radius
     thrust_per_mass = density / airframe.mass * airframe.disk_area * tip_speed**2 * thrust_coefficient
+    # v_h from the shared tip-speed node, as before the rotor model existed: the paper's NLP keeps its exact
+    # derivative expressions (its degenerate optima move with rounding otherwise)
     hover_induced_velocity = tip_speed * ca.sqrt(smooth_positive(thrust_coefficient, _THRUST_GUARD) / 2.0)
     guarded_tip_speed = smooth_positive(rotor_speed, _ROTOR_GUARD_RATIO * airframe.nominal_rotor_speed) * (
         airframe.rotor_radius
     )
-    axial_speed = v * ca.sin(pitch) - y * ca.cos(pitch)
+    axial_speed = state[1] * ca.sin(control[1]) - state[0] * ca.cos(control[1])
     profile = airframe.rotor_solidity * airframe.blade_drag_coefficient / 8.0
     if rotor_model.is_paper:
         inflow_ratio = (axial_speed + hover_induced_velocity) / guarded_tip_speed
         power_coefficient = profile + thrust_coefficient * inflow_ratio
     else:
-        edgewise_speed = v * ca.cos(pitch) + y * ca.sin(pitch)
+        _, edgewise_speed, _ = _rotor_speeds(airframe, state, control)
         induced = induced_velocity(
             rotor_model,
             hover_induced_velocity=hover_induced_velocity,
@@ -173,6 +189,7 @@ def _rotor_terms(airframe: Airframe, state, control):
             axial_speed=axial_speed,
             height=height,
             rotor_radius=airframe.rotor_radius,
+            momentum_roots=momentum_roots,
         )
         advance_ratio = edgewise_speed / guarded_tip_speed
         induced_power_factor = rotor_model.effective_induced_power_factor
@@ -187,11 +204,11 @@ def _fuselage_speed(y, v):
     return ca.sqrt(y**2 + v**2 + _SPEED_GUARD**2)
 
 
-def _state_derivative(airframe: Airframe, state, control):
+def _state_derivative(airframe: Airframe, state, control, momentum_roots=None):
     y, v, rotor_speed, _, _, power = (state[i] for i in range(6))
     pitch = control[1]
     drag_per_speed = 0.5 * airframe.air_density / airframe.mass * _fuselage_speed(y, v)
-    thrust_per_mass, rotor_power = _rotor_terms(airframe, state, control)
+    thrust_per_mass, rotor_power = _rotor_terms(airframe, state, control, momentum_roots)
     guarded_rotor_speed = smooth_positive(rotor_speed, _ROTOR_GUARD_RATIO * airframe.nominal_rotor_speed)
     return ca.vertcat(
         airframe.gravity - thrust_per_mass * ca.cos(pitch) - drag_per_speed * airframe.vertical_drag_area * y,
@@ -232,6 +249,43 @@ def disturbed_dynamics_function(airframe: Airframe) -> ca.Function:
     derivative = dynamics_function(airframe)(state, control) + ca.vertcat(disturbance, ca.DM.zeros(3))
     return ca.Function(
         "disturbed_helicopter_dynamics", [state, control, disturbance], [derivative], ["x", "u", "d"], ["xdot"]
+    )
+
+
+@lru_cache(maxsize=64)
+def implicit_inflow_functions(airframe: Airframe) -> tuple[ca.Function, ca.Function, ca.Function]:
+    r"""The momentum rotor with its two momentum roots as inputs, for an NLP that carries them as variables.
+
+    Returns ``(dynamics, residuals, roots)``: ``dynamics(x[6], u[2], d[3], r[2]) -> xdot[6]`` is
+    :func:`disturbed_dynamics_function` with r = (ν_G(U_T, U_P), ν_G(0, U_P)) in m/s given instead of found by
+    Newton steps; ``residuals(x, u, r) -> [2]`` are :func:`~helireach_ros.core.inflow.momentum_root_residual` over
+    the hover v_h² (zero at the roots; O(1)); ``roots(x, u) -> r[2]`` are the Newton-step roots every other
+    consumer uses (a consistent starting point). Equal to :func:`disturbed_dynamics_function` at the roots, to the
+    Newton steps' accuracy.
+
+    Raises:
+        ValueError: the airframe has the paper's rotor (it has no momentum roots).
+    """
+    if airframe.rotor_model.inflow is not InflowModel.MOMENTUM:
+        raise ValueError(f"{airframe.name} has the paper's rotor: no momentum roots to carry")
+    state, control = ca.SX.sym("x", 6), ca.SX.sym("u", 2)
+    disturbance, roots = ca.SX.sym("d", 3), ca.SX.sym("r", 2)
+    derivative = _state_derivative(airframe, state, control, roots) + ca.vertcat(disturbance, ca.DM.zeros(3))
+    hover, edgewise, axial = _rotor_speeds(airframe, state, control)
+    hover_squared = airframe.gross_weight / (2.0 * airframe.air_density * airframe.disk_area)
+    residuals = ca.vertcat(
+        momentum_root_residual(roots[0], hover_induced_velocity=hover, edgewise_speed=edgewise, axial_speed=axial),
+        momentum_root_residual(roots[1], hover_induced_velocity=hover, edgewise_speed=0.0, axial_speed=axial),
+    ) / hover_squared
+    found = hover * ca.vertcat(
+        momentum_inflow_ratio(edgewise / hover, axial / hover), momentum_inflow_ratio(0.0, axial / hover)
+    )
+    return (
+        ca.Function(
+            "implicit_dynamics", [state, control, disturbance, roots], [derivative], ["x", "u", "d", "r"], ["xdot"]
+        ),
+        ca.Function("momentum_root_residuals", [state, control, roots], [residuals], ["x", "u", "r"], ["residual"]),
+        ca.Function("momentum_roots", [state, control], [found], ["x", "u"], ["r"]),
     )
 
 
