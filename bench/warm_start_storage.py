@@ -5,8 +5,10 @@ Run: .venv/bin/python bench/warm_start_storage.py [--envelope FILE] [--states 60
 The shipped envelope stores, per node, the plan's control function (what a fallback flies) and IPOPT's solution
 (primal, bound and constraint multipliers: 93 % of the file). For random level-flight failure states (uniform in
 20-780 ft, 0-118 kt) this solves each from the nearest stored plan with the warm start as stored (float32), rounded
-to float16, primal only (multipliers zero) in float32 and float16, and cold; it prints iterations and solve time
-(median, p95), whether the status equals the cold solve's, and the compressed size of each storage option.
+to float16, primal only (multipliers zero) in float32 and float16, the primal rebuilt from the stored control
+function alone (``ControlFunctionWarmStart``: the function flown from the node's state), and cold; it prints
+iterations and solve time (median, p95), whether the status equals the cold solve's, the time the rebuild takes,
+and the compressed size of each storage option.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import argparse
 import io
 import sys
+import time
 import warnings
 
 import numpy as np
@@ -22,7 +25,7 @@ from baseline_config import loadavg_text
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, read_envelope_file
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import WarmStart, get_planner
+from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart, get_planner
 from helireach_ros.core.settings import load_settings
 from helireach_ros.core.units import FT, KT
 
@@ -70,7 +73,9 @@ def main(argv: list[str] | None = None) -> int:
     planner = get_planner(airframe, load_settings())
     print(f"NLP functions: {planner.nlp_functions}; linear solver: {planner.linear_solver}")
     rng = np.random.default_rng(arguments.seed)
-    results: dict[str, list[tuple[int, float, bool]]] = {name: [] for name in (*VARIANTS, "cold")}
+    rebuilt_name = "primal rebuilt from the control function"
+    results: dict[str, list[tuple[int, float, bool]]] = {name: [] for name in (*VARIANTS, rebuilt_name, "cold")}
+    rebuild_ms = []
     for _ in range(arguments.states):
         height, speed = rng.uniform(20.0, 780.0) * FT, rng.uniform(0.0, 118.0) * KT
         stored = envelope.nearest_plan(height, speed, 0.0)
@@ -83,6 +88,15 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 plan = planner.plan(state, warm_start=variant(stored.warm_start))
             results[name].append((plan.solver.iterations, plan.solver.solve_time_ms, plan.status == cold.status))
+        plan = cold
+        if stored is not None:
+            node = initial_state_after_failure(airframe, stored.height, stored.speed, climb_rate=stored.climb_rate)
+            started = time.perf_counter()
+            planner.transcription.primal_from_controls(node.as_array(), stored.control_times, stored.control_values)
+            rebuild_ms.append(1e3 * (time.perf_counter() - started))
+            from_controls = ControlFunctionWarmStart(node.as_array(), stored.control_times, stored.control_values)
+            plan = planner.plan(state, warm_start=from_controls)
+        results[rebuilt_name].append((plan.solver.iterations, plan.solver.solve_time_ms, plan.status == cold.status))
     print("| warm start | median iterations | p95 iterations | median ms | p95 ms | status as cold |")
     print("|---|---|---|---|---|---|")
     for name, rows in results.items():
@@ -91,6 +105,8 @@ def main(argv: list[str] | None = None) -> int:
         same = sum(row[2] for row in rows)
         print(f"| {name} | {np.median(iterations):.0f} | {np.percentile(iterations, 95):.0f} | {np.median(times):.1f} "
               f"| {np.percentile(times, 95):.1f} | {same}/{len(rows)} |")  # fmt: skip
+    print(f"rebuilding a primal from a control function: median {np.median(rebuild_ms):.1f} ms, "
+          f"p95 {np.percentile(rebuild_ms, 95):.1f} ms (in plan(), before the solve)")  # fmt: skip
     arrays = envelope.arrays
     answers = {name: array for name, array in arrays.items() if not name.startswith("plan_")}
     controls = {name: arrays[name] for name in ("plan_control_times", "plan_control_values")}

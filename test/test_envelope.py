@@ -32,7 +32,7 @@ from helireach_ros.core.envelope.data import (
 from helireach_ros.core.envelope.grid import parse_list, parse_range
 from helireach_ros.core.envelope.plot import boundary_geometry, plot_envelope
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
+from helireach_ros.core.planner import ControlFunctionWarmStart, get_planner
 from helireach_ros.core.units import FT, KT
 
 HEIGHTS_FT = "0:600:4"
@@ -148,6 +148,30 @@ def test_nearest_plan_warm_starts_the_planner(small, airframe, settings):
     assert warm.solver.warm_started and warm.solver.success
     assert warm.status == planner.plan(state).status
     assert small.nearest_plan(math.nan, 0.0) is None
+
+
+@pytest.mark.parametrize("method", ["flyable", "verified"])
+def test_a_stored_control_function_rebuilds_the_stored_solution(small, airframe, settings, method):
+    """What a file without the solver's state can still warm-start from: the stored control function flown from
+    the stored plan's state gives back its primal point (to the integrator's accuracy), and a solve from it is a
+    warm solve with the cold solve's status."""
+    planner = get_planner(airframe, settings.replace(method=method))
+    node_state = initial_state_after_failure(airframe, 600 * FT, 60 * KT)
+    stored = planner.plan(node_state)
+    assert stored.status == "safe"
+    rebuilt = planner.transcription.primal_from_controls(
+        node_state.as_array(), stored.control_times, stored.control_values
+    )
+    assert rebuilt is not None
+    assert np.max(np.abs(rebuilt - stored.warm_start.primal)) < 0.02  # scaled units: O(1) variables
+    state = initial_state_after_failure(airframe, 590 * FT, 58 * KT)
+    from_controls = ControlFunctionWarmStart(node_state.as_array(), stored.control_times, stored.control_values)
+    warm = planner.plan(state, warm_start=from_controls)
+    assert warm.solver.warm_started and warm.solver.success
+    assert warm.status == planner.plan(state).status
+    # a control function of another mesh cannot be rebuilt: the solve is cold, not wrong
+    other = ControlFunctionWarmStart(node_state.as_array(), stored.control_times[:-2], stored.control_values[:, :-2])
+    assert not planner.plan(state, warm_start=other).solver.warm_started
 
 
 # --- refusing bad files ----------------------------------------------------------------------------------

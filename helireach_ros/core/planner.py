@@ -47,6 +47,7 @@ from helireach_ros.core.verification import (
 
 __all__ = [
     "STATUSES",
+    "ControlFunctionWarmStart",
     "LandingPlan",
     "LandingPlanner",
     "SolverStats",
@@ -93,6 +94,24 @@ class WarmStart:
     primal: np.ndarray
     bound_multipliers: np.ndarray
     constraint_multipliers: np.ndarray
+
+
+@dataclass(frozen=True)
+class ControlFunctionWarmStart:
+    """A stored plan's control function to start the next solve from, when its NLP solution was not kept: the
+    planner flies it from the new problem's start to rebuild a primal point (multipliers zero).
+
+    Attributes:
+        initial_state: the stored plan's state at its start (6, SI).
+        control_times: breakpoints from 0 to the landing time, s (including any reaction-delay segment).
+        control_values: 2 × n, as :class:`~helireach_ros.core.transcription.base.DecodedPlan` holds them.
+        reaction_delay_s: the stored plan's delay segment at its start, s (flown, then stripped).
+    """
+
+    initial_state: np.ndarray
+    control_times: np.ndarray
+    control_values: np.ndarray
+    reaction_delay_s: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -256,7 +275,7 @@ class LandingPlanner:
     def plan(
         self,
         state: HelicopterState | np.ndarray,
-        warm_start: WarmStart | None = None,
+        warm_start: WarmStart | ControlFunctionWarmStart | None = None,
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
@@ -270,7 +289,8 @@ class LandingPlanner:
 
         Args:
             state: the state at the failure.
-            warm_start: a previous plan's :attr:`LandingPlan.warm_start` (same airframe/settings).
+            warm_start: a previous plan's :attr:`LandingPlan.warm_start` (same airframe/settings), or a stored plan's
+                control function (:class:`ControlFunctionWarmStart`) that the planner flies to rebuild one.
             initial_control: (C_T, θ) being flown at ``state`` (None: the trim of steady flight at its speed and
                 climb rate, :func:`~helireach_ros.core.model.trim_controls`, i.e. the flight before a failure).
                 Re-plans pass the current plan's control, so the flyable controls stay continuous.
@@ -293,6 +313,9 @@ class LandingPlanner:
         control = self._initial_control(initial, initial_control)
         disturbance = _checked_disturbance(disturbance)
         transcription = self.transcription
+        stored_controls = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
+        if stored_controls is not None:
+            warm_start = None  # rebuilt below, from where the NLP starts
         if warm_start is not None and (
             warm_start.primal.shape != transcription.lbx.shape
             or warm_start.constraint_multipliers.shape != transcription.lbg.shape
@@ -305,6 +328,8 @@ class LandingPlanner:
             start, outcome = self._after_delay(initial, control, delay, disturbance)
         else:
             start, outcome = initial, GROUND_AT_FAILURE if self._touches_down_outside_limits(initial) else ""
+        if stored_controls is not None and not outcome:
+            warm_start = self._rebuilt_warm_start(stored_controls)
         if outcome:
             decoded, solver_stats, warm = self._without_nlp(initial, start, control, delay, outcome, warm_start)
         else:
@@ -348,6 +373,23 @@ class LandingPlanner:
             reaction_delay_s=delay,
             disturbance=disturbance,
         )
+
+    def _rebuilt_warm_start(self, stored: ControlFunctionWarmStart) -> WarmStart | None:
+        """The stored plan's primal point from its control function, flown from its own start (after its delay
+        segment); None (a cold solve) where the transcription cannot rebuild one."""
+        times = np.asarray(stored.control_times, dtype=float)
+        values = np.asarray(stored.control_values, dtype=float)
+        start = np.asarray(stored.initial_state, dtype=float)[:6]
+        if stored.reaction_delay_s > 0.0:  # fly the delay segment, then restart the clock where the NLP starts
+            held = values[:, 0]
+            start = self._after_delay(start, held, stored.reaction_delay_s, np.zeros(3))[0]
+            keep = times >= stored.reaction_delay_s - 1e-9
+            times = times[keep] - stored.reaction_delay_s
+            values = values[:, -times.size :] if values.shape[1] == keep.size else values[:, -(times.size - 1) :]
+        primal = self.transcription.primal_from_controls(start, times, values)
+        if primal is None:
+            return None
+        return WarmStart(primal, np.zeros_like(primal), np.zeros_like(self.transcription.lbg))
 
     def _initial_control(self, state: np.ndarray, initial_control: np.ndarray | None) -> np.ndarray:
         if initial_control is None:

@@ -157,6 +157,15 @@ class Transcription(ABC):
     def decode(self, solution: np.ndarray, initial_state: np.ndarray) -> DecodedPlan:
         """The decision vector in physical units."""
 
+    def primal_from_controls(
+        self, initial_state: np.ndarray, control_times: np.ndarray, control_values: np.ndarray
+    ) -> np.ndarray | None:
+        """A primal point of this NLP from a stored plan's control function (breakpoints from 0 to its landing time,
+        values as :class:`DecodedPlan` holds them) flown from that plan's initial state: the stored solution, to
+        the integrator's accuracy, when only the control function was kept. None where the scheme cannot rebuild
+        one (the caller then solves cold)."""
+        return None
+
     # -- shared pieces ---------------------------------------------------------------------------------
     def epigraph(self, slack, terminal_state_scaled):
         """Constraints ``±term − 1 − slack ≤ 0`` for the three normalised terminal terms."""

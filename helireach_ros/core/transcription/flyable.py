@@ -148,6 +148,14 @@ class FlyableTranscription(VerifiedTranscription):
     def initial_guess(self, initial_state: np.ndarray) -> np.ndarray:
         return np.clip(super().initial_guess(initial_state), self.lbx, self.ubx)
 
+    def interval_controls(self, control_times: np.ndarray, control_values: np.ndarray) -> np.ndarray:
+        """The decided breakpoints u_1 … u_K (u_0 is the parameter's)."""
+        return np.asarray(control_values, dtype=float)[:, 1 : self.settings.intervals + 1]
+
+    def _interval_ends(self, values: np.ndarray, interval: int) -> tuple[np.ndarray, np.ndarray]:
+        """Linear between breakpoints."""
+        return values[:, interval], values[:, interval + 1]
+
     def decode(self, solution: np.ndarray, initial_state: np.ndarray) -> DecodedPlan:
         intervals = self.settings.intervals
         landing_time = float(solution[0]) * _TIME_SCALE

@@ -25,11 +25,14 @@ without the six-state NLP's degenerate P ≥ 0 bound when the engine has no powe
 
 from __future__ import annotations
 
+from functools import cached_property
+
 import casadi as ca
 import numpy as np
 
 from helireach_ros.core.collocation import lagrange_basis_derivatives, lagrange_basis_values, radau_iia_points
-from helireach_ros.core.transcription.base import DecodedPlan, Transcription
+from helireach_ros.core.model import disturbed_dynamics_function
+from helireach_ros.core.transcription.base import DecodedPlan, Transcription, terminal_cost
 
 __all__ = ["VerifiedTranscription", "interval_fractions"]
 
@@ -166,6 +169,67 @@ class VerifiedTranscription(Transcription):
                 (states / self.state_scale[:, None])[list(self.state_rows)].reshape(-1, order="F"),
             ]
         )
+
+    @cached_property
+    def _interval_integrator(self) -> ca.Function:
+        """CVODES over one interval in normalised time σ ∈ [0, 1], the control linear in σ, outputs at the Radau
+        points: p = (u_start[2], u_end[2], interval length, d[3])."""
+        state, parameters, sigma = ca.SX.sym("x", 6), ca.SX.sym("p", 8), ca.SX.sym("s")
+        control = parameters[0:2] + sigma * (parameters[2:4] - parameters[0:2])
+        ode = parameters[4] * disturbed_dynamics_function(self.airframe)(state, control, parameters[5:8])
+        options = {"reltol": 1e-6, "abstol": 1e-8, "max_num_steps": 20000}
+        problem = {"x": state, "p": parameters, "t": sigma, "ode": ode}
+        return ca.integrator("warm_start_interval", "cvodes", problem, 0.0, list(self.radau), options)
+
+    def interval_controls(self, control_times: np.ndarray, control_values: np.ndarray) -> np.ndarray:
+        """The stored control function as this scheme's control decision (2 × K): one value per interval."""
+        return np.asarray(control_values, dtype=float)[:, : self.settings.intervals]
+
+    def primal_from_controls(
+        self, initial_state: np.ndarray, control_times: np.ndarray, control_values: np.ndarray
+    ) -> np.ndarray | None:
+        """The control function flown from its own initial state through the Radau points of the same mesh
+        stretched to its landing time (the states the NLP collocated, to the integrator's accuracy); the slack is
+        the terminal J. None when the function has another number of intervals or the flight leaves the model."""
+        intervals = self.settings.intervals
+        control_times = np.asarray(control_times, dtype=float)
+        values = np.asarray(control_values, dtype=float)
+        if control_times.shape != (intervals + 1,) or not np.all(np.isfinite(values)):
+            return None
+        landing_time = float(control_times[-1])
+        if not self.settings.min_time_to_land <= landing_time <= self.settings.max_time_to_land:
+            return None
+        decided = self.interval_controls(control_times, values)
+        state = np.asarray(initial_state, dtype=float)[:6]
+        disturbance = np.zeros(3)
+        points = []
+        for k in range(intervals):
+            start, end = self._interval_ends(values, k)
+            step = landing_time * float(self.fractions[k])
+            try:
+                outputs = np.asarray(self._interval_integrator(x0=state, p=np.concatenate([start, end, [step],
+                                                                                         disturbance]))["xf"])
+            except RuntimeError:
+                return None
+            points.append(outputs)
+            state = outputs[:, -1]
+        states = np.hstack(points)
+        if states.shape != (6, self.n_states) or not np.all(np.isfinite(states)):
+            return None
+        slack = float(terminal_cost(self.airframe, states[:, -1]))
+        rows = list(self.state_rows)
+        primal = np.concatenate(
+            [
+                [landing_time / _TIME_SCALE, slack],
+                (decided / self.control_scale[:, None]).reshape(-1, order="F"),
+                (states[rows] / self.state_scale[rows, None]).reshape(-1, order="F"),
+            ]
+        )
+        return np.clip(primal, self.lbx, self.ubx)
+
+    def _interval_ends(self, values: np.ndarray, interval: int) -> tuple[np.ndarray, np.ndarray]:
+        """The control at the start and the end of an interval (constant: zero-order hold)."""
+        return values[:, interval], values[:, interval]
 
     def decode(self, solution: np.ndarray, initial_state: np.ndarray) -> DecodedPlan:
         intervals = self.settings.intervals
