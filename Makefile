@@ -1,19 +1,19 @@
 # Two commands set everything up on a fresh machine: `make demo` and `make test`.
-# Both create (or refresh) the local .venv when requirements.txt or setup.py change.
+# Both create (or refresh) the local .venv when requirements*.txt or setup.py change.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: demo test lint bench clean venv nlp-cache
+.PHONY: demo test test-fast lint bench clean venv nlp-cache
 
 venv: $(STAMP)
 
-$(STAMP): requirements.txt setup.py
+$(STAMP): requirements.txt requirements-test.txt setup.py
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -r requirements.txt
+	$(BIN)/python -m pip install --quiet -r requirements-test.txt
 	$(BIN)/python -m pip install --quiet --no-deps -e .
 	touch $(STAMP)
 
@@ -22,7 +22,13 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench
-	$(BIN)/python -m pytest -q test
+	$(BIN)/python -m pytest -q --durations=25 test
+
+# The inner loop: lint and every test but those that start ROS systems, drive Chromium, compile code or fly many
+# closed loops (pytest markers; CI runs everything).
+test-fast: $(STAMP)
+	$(BIN)/ruff check helireach_ros test bench
+	$(BIN)/python -m pytest -q -m "not (system or realtime or browser or build or slow)" test
 
 lint: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench

@@ -1,5 +1,6 @@
 """ament_python package definition for helireach_ros (also installs with plain pip)."""
 
+import os
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -9,6 +10,12 @@ package_name = "helireach_ros"
 
 def _files(pattern: str) -> list[str]:
     return sorted(path for path in glob(pattern, recursive=True) if not path.endswith("/"))
+
+
+def _requirements(path: str) -> list[str]:
+    """The requirement lines of a pip requirements file (comments and blank lines dropped)."""
+    with open(os.path.join(os.path.dirname(os.path.abspath(__file__)), path)) as lines:
+        return [line.split("#", 1)[0].strip() for line in lines if line.split("#", 1)[0].strip()]
 
 
 setup(
@@ -25,13 +32,13 @@ setup(
         ("share/" + package_name + "/config/scenarios", _files("config/scenarios/*.yaml")),
         ("share/" + package_name + "/msg_docs", _files("msg_docs/*.md")),
     ],
-    install_requires=["setuptools"],
+    # the runtime requirements (requirements.txt); the tests' are in requirements-test.txt
+    install_requires=_requirements("requirements.txt"),
     zip_safe=True,
     maintainer="helireach_ros maintainers",
     maintainer_email="maintainers@helireach.invalid",
     description="Helicopter engine-failure reachability: verified landing plans, H-V envelopes, ROS 2 nodes.",
     license="Apache-2.0",
-    tests_require=["pytest"],
     entry_points={
         "console_scripts": [
             "helireach = helireach_ros.cli.main:main",

@@ -74,3 +74,19 @@ def airframe() -> Airframe:
 def settings() -> PlannerSettings:
     """The default planner settings (config/planner.yaml)."""
     return load_settings()
+
+
+# Markers for the inner loop (`make test-fast` deselects them; `make test` and CI run everything). A test gets
+# `system` when it uses the real middleware (a ROS context, a localhost domain, the display's ROS harness) and
+# `browser` when it drives Chromium; whole files that start node processes, compile code, run the demo in real
+# time or fly many closed loops are marked in their own `pytestmark`.
+_SYSTEM_FIXTURES = {"context", "localhost_ros_domain", "ros"}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        fixtures = set(getattr(item, "fixturenames", ()))
+        if fixtures & _SYSTEM_FIXTURES:
+            item.add_marker(pytest.mark.system)
+        if "browser" in fixtures:
+            item.add_marker(pytest.mark.browser)

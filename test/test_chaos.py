@@ -31,6 +31,8 @@ from helireach_ros.core.mcap_log.recover import recover_log
 from helireach_ros.core.resources import config_path
 from helireach_ros.ros import messages as rm
 
+pytestmark = [pytest.mark.system, pytest.mark.realtime]
+
 BIN = Path(sys.executable).parent
 START_TIMEOUT_S = 60.0
 RECOVERY_S = 2.0

@@ -19,6 +19,8 @@ from helireach_ros.core.planner import LandingPlanner
 from helireach_ros.core.settings import PlannerSettings
 from helireach_ros.core.units import FT, KT
 
+pytestmark = [pytest.mark.build]
+
 TINY = PlannerSettings(intervals=6, degree=2)  # flyable, coarse: fast to compile (2-4 intervals are infeasible)
 
 

@@ -18,6 +18,8 @@ import pytest
 
 from helireach_ros.core.envelope.data import default_envelope_path
 
+pytestmark = [pytest.mark.system]
+
 BIN = Path(sys.executable).parent
 NODE_SCRIPTS = ("helireach_monitor", "helireach_envelope_status", "helireach_planner", "helireach_sim_vehicle",
                 "helireach_recorder")  # fmt: skip

@@ -29,6 +29,8 @@ from helireach_ros.ros import messages as rm
 from helireach_ros.ros.bringup import build_system
 from helireach_ros.ros.input_fuzzer import PUBLISHER_QOS, VehicleInputFuzzer
 
+pytestmark = [pytest.mark.system]
+
 SEED = int(os.environ.get("HELIREACH_FUZZ_SEED", "20261201"))
 MESSAGES = int(os.environ.get("HELIREACH_FUZZ_MESSAGES", "2500"))
 

@@ -47,6 +47,8 @@ from helireach_ros.core.mcap_log.run_metadata import status_metadata_updates
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.recorder import qos_profile
 
+pytestmark = [pytest.mark.system]
+
 REPO = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
 TIMEOUT_S = 40.0

@@ -24,6 +24,8 @@ from helireach_ros.core.envelope.robust import RobustEnvelopeJob, add_robust_ver
 from helireach_ros.core.uncertainty import parse_uncertainty_set
 from helireach_ros.core.units import FT, KT
 
+pytestmark = [pytest.mark.slow]
+
 _SENSORS = (("height", "ft"), ("forward_speed", "kt"), ("climb_rate", "ft/s"), ("rotor_speed", "rad/s"))
 _PARAMETERS = (
     "gross_weight", "horizontal_drag_area", "vertical_drag_area", "blade_drag_coefficient", "rotor_inertia",

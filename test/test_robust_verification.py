@@ -27,6 +27,8 @@ from helireach_ros.core.simulation import Scenario, SimulatedVehicle
 from helireach_ros.core.uncertainty import PerturbedModel, UncertainRange, load_uncertainty_set
 from helireach_ros.core.units import FT, KT
 
+pytestmark = [pytest.mark.slow]
+
 _WORST_CORNER = (
     "gross_weight+5%,horizontal_drag_area+20%,vertical_drag_area+20%,blade_drag_coefficient+10%,"
     "rotor_inertia+10%,rotor_power_efficiency+5%,density_altitude+500ft,latency0.30s"

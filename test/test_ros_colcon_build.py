@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = [pytest.mark.build]
+
 ROOT = Path(__file__).resolve().parent.parent
 NODE_SCRIPTS = (
     "helireach_monitor",

@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
@@ -26,6 +27,8 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros.core.mcap_log import read_log, read_log_topics
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
+
+pytestmark = [pytest.mark.system]
 
 TIMEOUT_S = 40.0
 

@@ -36,6 +36,8 @@ from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 from helireach_ros.ros.plan_comparison import compare_logged_plans
 from helireach_ros.ros.replay import replay_log
 
+pytestmark = [pytest.mark.system, pytest.mark.realtime]
+
 VEHICLE_TOPICS = [rm.TOPIC_ODOMETRY, rm.TOPIC_ROTOR, rm.TOPIC_ENGINE_FAILURE]
 
 
