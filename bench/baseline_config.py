@@ -6,7 +6,10 @@ Imported by the bench scripts (which run with ``bench/`` on ``sys.path``).
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import os
+import subprocess
+import sys
 
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.settings import PlannerSettings
@@ -16,6 +19,7 @@ __all__ = [
     "baseline_codegen",
     "baseline_settings",
     "loadavg_text",
+    "results_footer",
     "six_state_settings",
     "with_mumps",
 ]
@@ -49,3 +53,14 @@ def with_mumps(codegen: CodegenSettings) -> CodegenSettings:
 def loadavg_text() -> str:
     """``os.getloadavg()`` as printed by the benches (1, 5 and 15 minutes)."""
     return " ".join(f"{load:.2f}" for load in os.getloadavg())
+
+
+def results_footer(load_before: str, *details: str) -> str:
+    """The line a generated results page ends with: the command that reproduces it (this script and its
+    arguments), the commit, the date, the load average before and after, and ``details``."""
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
+    command = " ".join([".venv/bin/python", sys.argv[0], *sys.argv[1:]])
+    parts = [f"Command: `{command}`", f"commit {commit or 'unknown'}", datetime.date.today().isoformat(),
+             f"load {load_before} → {loadavg_text()}", *details]  # fmt: skip
+    return "; ".join(parts) + "."
+

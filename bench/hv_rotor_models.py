@@ -13,13 +13,12 @@ in one figure (``<figures>/<airframe>_rotor_models.png``) and prints ``bench/hv_
 from __future__ import annotations
 
 import argparse
-import datetime
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from baseline_config import loadavg_text
+from baseline_config import loadavg_text, results_footer
 from hv_table import shape_row
 
 ROTOR_MODELS = ("paper", "momentum")
@@ -68,11 +67,10 @@ def main(argv: list[str] | None = None) -> int:
     table = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
     table += ["| " + " | ".join(row[column] for column in columns) + " |" for row in rows]
     print("\n".join(table))
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    footer = (
-        f"Command: `.venv/bin/python bench/hv_rotor_models.py {' '.join(sys.argv[1:])}`; commit {commit or 'unknown'}; "
-        f"{datetime.date.today().isoformat()}; load {load_before} → {loadavg_text()}; flyable plans, default "
-        f"settings, grid {arguments.heights_ft} ft × {arguments.speeds_kt} kt (start:stop:count), 2 local workers."
+    footer = results_footer(
+        load_before,
+        f"flyable plans, default settings, grid {arguments.heights_ft} ft × {arguments.speeds_kt} kt "
+        "(start:stop:count), 2 local workers",
     )
     print(footer)
     if arguments.write:

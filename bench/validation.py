@@ -18,14 +18,12 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import datetime
 import math
-import subprocess
 import sys
 import time
 
 import numpy as np
-from baseline_config import loadavg_text
+from baseline_config import loadavg_text, results_footer
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.inflow import InflowModel
@@ -137,12 +135,7 @@ def main(argv: list[str] | None = None) -> int:
         sections.append(f"### {name}\n\nPerformance (sea-level ISA, out of ground effect):\n\n{_table(performance)}\n\n"
                         f"Flyable landing plans (default planner settings):\n\n{_table(plans)}\n")  # fmt: skip
         print(sections[-1], flush=True)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    footer = (
-        f"Command: `.venv/bin/python bench/validation.py {' '.join(sys.argv[1:])}`; commit {commit or 'unknown'}; "
-        f"{datetime.date.today().isoformat()}; {time.perf_counter() - started:.0f} s; load {load_before} → "
-        f"{loadavg_text()}."
-    )
+    footer = results_footer(load_before, f"{time.perf_counter() - started:.0f} s")
     print(footer)
     if arguments.write:
         with open(arguments.write, "w") as page:

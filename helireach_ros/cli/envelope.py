@@ -27,6 +27,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from helireach_ros.cli.options import add_rotor_model_option
 from helireach_ros.core.settings import METHODS
 
 __all__ = ["register"]
@@ -74,13 +75,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "holding one file per combination.",
     )
     compute.add_argument("--airframe", default="uh60a_class", help="airframe name or YAML path (default: %(default)s)")
-    compute.add_argument(
-        "--rotor-model",
-        choices=("airframe", "paper", "momentum"),
-        default="airframe",
-        help="rotor aerodynamics: the airframe file's, the paper's hover inflow, or momentum inflow with ground "
-        "effect (default: %(default)s)",
-    )
+    add_rotor_model_option(compute)
     compute.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
     compute.add_argument("--heights-ft", default="0:800:41", help="start:stop:count, inclusive (default: %(default)s)")
     compute.add_argument("--speeds-kt", default="0:120:25", help="start:stop:count, inclusive (default: %(default)s)")

@@ -14,6 +14,8 @@ import math
 import sys
 from pathlib import Path
 
+from helireach_ros.cli.options import add_rotor_model_option
+
 __all__ = ["register", "run_plan"]
 
 
@@ -55,13 +57,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="s the pre-failure trim controls are held before the plan starts (default: config, 0)",
     )
     parser.add_argument("--settings", default=None, help="planner settings YAML (default: config/planner.yaml)")
-    parser.add_argument(
-        "--rotor-model",
-        choices=("airframe", "paper", "momentum"),
-        default="airframe",
-        help="rotor aerodynamics: the airframe file's, the paper's hover inflow, or momentum inflow with ground "
-        "effect (default: %(default)s; the paper method always uses the paper's)",
-    )
+    add_rotor_model_option(parser)
     parser.add_argument("--weight-lb", type=float, default=None, help="override the gross weight [lbf]")
     parser.add_argument("--density-altitude-ft", type=float, default=None, help="override the density altitude [ft]")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
