@@ -561,3 +561,17 @@ def test_a_computed_envelope_records_where_its_answers_hold(small):
 
     assert small.metadata["validity_domain"] == ValidityDomain().to_metadata()
     assert ValidityDomain.from_metadata(small.metadata) == ValidityDomain()
+
+
+def test_a_stored_control_function_with_a_delay_segment_warm_starts_after_it(airframe, settings):
+    planner = get_planner(airframe, settings.replace(reaction_delay_s=0.5))
+    node_state = initial_state_after_failure(airframe, 600 * FT, 60 * KT)
+    stored = planner.plan(node_state)
+    assert stored.control_times[1] == pytest.approx(0.5)  # the delay segment leads the stored function
+    from_controls = ControlFunctionWarmStart(
+        node_state.as_array(), stored.control_times, stored.control_values, reaction_delay_s=0.5
+    )
+    state = initial_state_after_failure(airframe, 590 * FT, 58 * KT)
+    warm = planner.plan(state, warm_start=from_controls)
+    assert warm.solver.warm_started and warm.solver.success
+    assert warm.status == planner.plan(state).status
