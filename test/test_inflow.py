@@ -199,8 +199,9 @@ def test_rotor_model_section_is_parsed_and_checked():
     assert parse_airframe(_document(None)).rotor_model == PAPER_ROTOR_MODEL
     with pytest.raises(ConfigError, match=r"inflow must be momentum \| paper_hover"):
         parse_airframe(_document({"inflow": "uniform", **numbers}))
-    with pytest.raises(ConfigError, match=r"ground_effect must be on \| off"):
-        parse_airframe(_document({"ground_effect": "maybe", **numbers}))
+    for wrong in ("maybe", ["on"], 1):
+        with pytest.raises(ConfigError, match=r"ground_effect must be on \| off"):
+            parse_airframe(_document({"ground_effect": wrong, **numbers}))
     with pytest.raises(ConfigError, match=r"missing key.*hub_height"):
         parse_airframe(_document({"inflow": "momentum", "ground_effect": True,
                                   **{k: v for k, v in numbers.items() if k != "hub_height"}}))  # fmt: skip

@@ -412,7 +412,7 @@ def _parse_rotor_model(section: Any, where: str) -> tuple[RotorModel, list[tuple
     ground_effect = section.get("ground_effect", "on")
     if isinstance(ground_effect, str):
         ground_effect = ground_effect.lower()
-    if ground_effect not in _SWITCHES:
+    if not isinstance(ground_effect, bool | str) or ground_effect not in _SWITCHES:
         raise ConfigError(f"{where}rotor_model.ground_effect must be on | off, got {ground_effect!r}")
     numbers = {key: section[key] for key in _ROTOR_MODEL_SCHEMA if key in section}
     required = ["induced_power_factor", "profile_power_speed_factor"]
