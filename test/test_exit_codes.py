@@ -1,4 +1,4 @@
-"""Exit codes and command lines of the real console scripts (subprocesses), as the README's table lists them.
+"""Exit codes and command lines of the real console scripts (subprocesses), as docs/guides/using.md's table lists them.
 
 0 = success / safe / stopped by Ctrl-C or SIGTERM, 1 = not safe (plan, envelope query), 2 = bad input, with
 one line on stderr and no traceback.

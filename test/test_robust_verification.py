@@ -137,7 +137,7 @@ def test_the_default_sets_heavy_light_rotor_corners_have_no_landing_of_their_own
     """Why no plan from 500 ft / 75 kt can be robust over the default corners: of the four corners of the design
     with +5 % weight and -10 % rotor inertia, three have no safe landing even for a planner that knows them
     exactly, and the fourth only barely (the flare's rotor energy is short for the weight; measured: the same at
-    every node of an 8 x 7 grid, README "Robust verdicts")."""
+    every node of an 8 x 7 grid, docs/method/envelopes.md, "Robust verdicts")."""
     values = []
     for corner in uncertainty.verification_design():
         if corner.mismatch["gross_weight"] > 0 and corner.mismatch["rotor_inertia"] < 0:

@@ -152,8 +152,9 @@ def test_the_solver_pool_plans_for_the_requested_weight_and_builds_it_in_every_w
 
 def test_the_weight_plus_5_preset_lands_in_lock_step_with_the_node_weight_policy(airframe, settings) -> None:
     """The demo's ``--mismatch weight+5`` flown in lock-step time (deterministic; the real-time demo is measured in
-    the README): the node's policy (window, steadiness, band, quantisation) fed with the vehicle's readings before
-    the failure gives +5 %, and the closed loop planning for it lands; planning for the file's weight it does not."""
+    docs/method/envelopes.md): the node's policy (window, steadiness, band, quantisation) fed with the vehicle's
+    readings before the failure gives +5 %, and the closed loop planning for it lands; planning for the file's weight
+    it does not."""
     scenario = apply_mismatch_preset(load_scenario("demo_500ft_75kt"), "weight+5")
     tracker = WeightTracker(airframe, WeightTrackingSettings(band=plausible_band(load_uncertainty_set())))
     touchdowns = {}

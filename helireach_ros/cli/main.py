@@ -2,8 +2,9 @@
 
 Each module in :data:`SUBCOMMAND_MODULES` has ``register(subparsers)``, which adds its subcommand
 with ``set_defaults(handler=...)``; a handler takes the parsed arguments and returns an exit code, by one
-convention (README, "Exit codes"): 0 success (for a safety answer: safe), 1 a valid request answered "no" (not
-safe) or not produced, 2 bad input with one line on stderr (argparse's own usage errors are 2 as well).
+convention (docs/guides/using.md, "Exit codes"): 0 success (for a safety answer: safe), 1 a valid request
+answered "no" (not safe) or not produced, 2 bad input with one line on stderr (argparse's own usage errors are 2
+as well).
 Modules keep heavy imports (CasADi, rclpy) inside their handlers so ``helireach --help`` is fast.
 """
 

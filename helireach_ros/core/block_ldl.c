@@ -1,7 +1,7 @@
 /* A block LDL^T for IPOPT's KKT systems, behind IPOPT's MA27 interface (helireach_ros.core.block_ldl builds it and
  * hands it to IPOPT as `linear_solver ma27`, `hsllib <this library>`; IPOPT 3.14 loads MA27's four routines
  * MA27ID/AD/BD/CD from any library). It replaces MUMPS for the landing NLPs: measured 0.46-0.50x of MUMPS's IPOPT
- * time on flyable plans, with about the same iterations and the same statuses and replay verdicts (README, issue 13).
+ * time on flyable plans, with about the same iterations and the same statuses and replay verdicts (docs/results/measurements-log.md).
  *
  * IPOPT's augmented system K = [H J^T; J -dc I] has a zero diagonal at every multiplier until IPOPT regularises,
  * so no 1x1 pivot order works for it. The analysis pairs each multiplier with a primal variable of its constraint

@@ -15,11 +15,12 @@ one 2×2 pivot in a minimum-degree block order, and reads the inertia off the 2�
 inertia). It implements MA27's four routines, so IPOPT loads it with its own options ``linear_solver ma27`` and
 ``hsllib <library>``; HSL itself is not used.
 
-Measured (README, issue 13): 0.46–0.50× of MUMPS's IPOPT time on flyable plans with about the same iterations and
-the same statuses and replay verdicts at 60 of 60 states, the 41 × 25 envelope classified identically at all 1025 nodes,
-and the inertia right in every checked factorization. It is a performance choice like the compiled NLP functions
-(:class:`~helireach_ros.core.compiled_nlp.CodegenSettings`, not the planner settings): every plan called safe is
-still checked by the independent replay, so a poor factorization could cost iterations but never make a state safe.
+Measured (docs/results/measurements-log.md): 0.46–0.50× of MUMPS's IPOPT time on flyable plans with about the
+same iterations and the same statuses and replay verdicts at 60 of 60 states, the 41 × 25 envelope classified
+identically at all 1025 nodes, and the inertia right in every checked factorization. It is a performance choice
+like the compiled NLP functions (:class:`~helireach_ros.core.compiled_nlp.CodegenSettings`, not the planner
+settings): every plan called safe is still checked by the independent replay, so a poor factorization could cost
+iterations but never make a state safe.
 
 The library is compiled once per source (``-O2``, ~1 s) into the NLP cache folder the first time a planner is
 built (never inside a solve; ``make nlp-cache`` builds it ahead of time) and loaded only while its checksum

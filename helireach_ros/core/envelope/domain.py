@@ -6,7 +6,7 @@ aircraft only while the aircraft is in such a state, within tolerances:
 
 - **climb rate** within ±``climb_rate_tolerance`` of level flight (default 0.5 m/s ≈ 100 ft/min, *assumed*:
   the band a pilot calls "level"; a 2,000 ft/min descent at 20 ft, 90 kt is unsafe where the level-trim
-  envelope says safe — README, "Live reachability");
+  envelope says safe — docs/method/live-reachability.md);
 - **rotor speed** within ±``rotor_speed_tolerance`` × Ω₀ of Ω₀ (default 1 %, *assumed*: a governor's steady
   band). An unmeasured rotor speed cannot be checked: the state is then *not known* to be inside, and the
   safety status says so (it caps the level at WARN);

@@ -11,7 +11,7 @@ summary and index.
 What is lost: the incomplete record at the end of the file (usually nothing, because a chunk reaches
 the file in one write; a truncated copy can end inside one, whose time span is reported when its header
 survived) and what the writer still held in memory, the open chunk: at most ``max_chunk_age`` plus the
-recorder's check period of messages (README, "Logs"). The report cannot count those (they never
+recorder's check period of messages (docs/guides/failure-handling.md, "Logs"). The report cannot count those (they never
 reached the disk); it gives the recovered span so the caller can compare it with the kill time.
 """
 

@@ -19,7 +19,7 @@ airframe and conditions from the shared ``airframe``/``gross_weight``/``density_
 
 Loss bound: the open chunk is written out once its oldest message has waited ``flush_period`` (0.5 s),
 checked at every message and every ``flush_period / 2``, so no message waits in memory longer than
-0.75 s plus executor latency and a SIGKILL loses under 1 s of messages (README, "Logs").
+0.75 s plus executor latency and a SIGKILL loses under 1 s of messages (docs/guides/failure-handling.md, "Logs").
 
 Run: ``python -m helireach_ros.ros.nodes.recorder --ros-args -p log_dir:=/tmp/logs``. SIGINT/SIGTERM end
 spinning and the file is finished (summary and index written).
