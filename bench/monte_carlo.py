@@ -1,4 +1,4 @@
-"""Closed loop under uncertainty: how often the re-planning landing stays within limits (issue 12).
+"""Closed loop under uncertainty: how often the re-planning landing stays within limits.
 
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]

@@ -1,4 +1,4 @@
-"""Disturbance accelerations: the model's error learnt in flight and carried into the next plan (issue 12).
+"""Disturbance accelerations: the model's error learnt in flight and carried into the next plan.
 
 The NLP, its replay and the delay segment integrate the model plus d = (d_y, d_v, d_Ω); the closed loop
 estimates d from each re-planning interval's prediction error. Checked on the real model, the real IPOPT

@@ -95,7 +95,7 @@ def test_safe_above_the_band_and_a_low_level_band_at_every_speed(shipped):
     40-degree flares and ground skims landed from anywhere fast) no safe landing close to the ground at speed."""
     heights_ft, speeds_kt = shipped.heights / FT, shipped.speeds / KT
     band_top_ft = heights_ft[shipped.status[:, 0] == "unsafe"].max()
-    assert 100.0 <= band_top_ft <= 600.0  # "a few hundred feet" (issue 3)
+    assert 100.0 <= band_top_ft <= 600.0  # "a few hundred feet"
     high = shipped.status[heights_ft > band_top_ft, :]
     assert not np.any(high == "unsafe")
     assert np.mean(high == "safe") >= 0.97  # the rest: an unverified replay, never claimed safe

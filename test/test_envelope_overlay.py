@@ -1,4 +1,4 @@
-"""Overlay plots of several envelopes and the compute flags that choose their settings (issue 11, "Figures").
+"""Overlay plots of several envelopes and the compute flags that choose their settings ("Figures").
 
 Two tiny envelopes (2 × 2 nodes, 300-400 ft, 40-50 kt; real IPOPT) computed by the command line with
 ``--method paper`` and ``--method verified --reaction-delay-s 0``; the labels' rules use hand-made envelopes.

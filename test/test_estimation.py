@@ -1,4 +1,4 @@
-"""Today's gross weight from the steady flight before a failure (issue 12, estimation)."""
+"""Today's gross weight from the steady flight before a failure (estimation)."""
 
 from __future__ import annotations
 

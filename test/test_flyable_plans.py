@@ -1,4 +1,4 @@
-"""Flyable plans (issue 11): rates, attitudes, touchdown on the ground at touchdown attitude, no skims, delay.
+"""Flyable plans: rates, attitudes, touchdown on the ground at touchdown attitude, no skims, delay.
 
 Every check here is made on the independent replay (or on the plan's control function, which the replay
 integrates), recomputed in the test from the plan's arrays, not read from the planner's own report.

@@ -1,5 +1,5 @@
 """Robust verdicts in an envelope: computed by flying the landings (real IPOPT, real closed loops), stored,
-queried conservatively, drawn, and refused when inconsistent (issue 12, "robust envelope")."""
+queried conservatively, drawn, and refused when inconsistent ("robust envelope")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Failure → standby trajectory on the wire (issue 10), in the composed system with real rclpy.
+"""Failure → standby trajectory on the wire, in the composed system with real rclpy.
 
 What is tested is what the failure callback publishes, never how long it takes (the milliseconds are measured
 by ``bench/failure_latency.py``): a failure gives the verified standby plan, published as the very messages built

@@ -1,4 +1,4 @@
-"""The planner node plans for the gross weight it estimates before a failure (issue 12): real rclpy, real IPOPT,
+"""The planner node plans for the gross weight it estimates before a failure: real rclpy, real IPOPT,
 real solver worker processes.
 
 The vehicle is 5 % heavier than the airframe file: its rotor ``JointState`` carries the engine torque of that

@@ -1,4 +1,4 @@
-"""Robust verification of failure plans off the failure path: one low-priority worker process (issue 12).
+"""Robust verification of failure plans off the failure path: one low-priority worker process.
 
 A plan is published as soon as its nominal replay has verified it; its robust verification
 (:func:`~helireach_ros.core.robust_verification.verify_plan_robust`: the landing flown closed loop through the

@@ -10,7 +10,7 @@ as a :class:`~helireach_ros.core.simulation.ControlSchedule`; until then the veh
 
 With ``estimate_weight``, the planner first estimates today's gross weight from the steady flight before the
 failure (:func:`~helireach_ros.core.estimation.estimate_gross_weight`: the weight whose trim power is the
-measured engine power) and plans for it (issue 12, "estimation where it pays").
+measured engine power) and plans for it ("estimation where it pays").
 
 Unlike the real-time ROS system this is deterministic (seeded noise, fixed latency), so it measures
 what the closed loop tolerates: ``bench/closed_loop_latency.py`` sweeps the latency.

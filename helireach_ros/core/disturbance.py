@@ -1,4 +1,4 @@
-"""What the flight says about the model's error: disturbance accelerations for the next plan (issue 12).
+"""What the flight says about the model's error: disturbance accelerations for the next plan.
 
 Between two re-plans the closed loop knows where the vehicle was, which controls it flew, and where it is
 now. Integrating the planner's model over that interval from the earlier measurement, with the controls

@@ -1,4 +1,4 @@
-"""Named model mismatches the simulated vehicle can fly (``helireach demo --mismatch NAME``; issue 12).
+"""Named model mismatches the simulated vehicle can fly (``helireach demo --mismatch NAME``).
 
 Each preset is a ``parameter_mismatch`` of :class:`~helireach_ros.core.simulation.Scenario` (true value = the
 airframe file's × (1 + fraction)), i.e. what the vehicle is and the planner does not know:

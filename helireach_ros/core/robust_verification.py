@@ -1,4 +1,4 @@
-"""Robust verification: does a landing still work when the planner's model is wrong? (issue 12)
+"""Robust verification: does a landing still work when the planner's model is wrong?
 
 A plan is verified *nominally* by its replay (:mod:`helireach_ros.core.verification`): the model it was
 made with, flown open loop. Here the same landing is flown through perturbed models

@@ -16,7 +16,7 @@ the NLP built once and warmed up.
   supervision tick, :data:`SUPERVISION_PERIOD_S`, of the death or the timeout), and the caller falls back as it
   would after a failed solve. :attr:`SolverPool.restarts` counts restarts for diagnostics.
 - **Start method.** ``forkserver`` (or ``spawn``), never ``fork``: the parent runs rclpy's threads.
-- **Gross weight** (issue 12). A request may name the gross weight to plan for (NaN: the airframe's). A worker
+- **Gross weight**. A request may name the gross weight to plan for (NaN: the airframe's). A worker
   builds that weight's NLP at the first request for it (:func:`~helireach_ros.core.planner.get_planner` caches up
   to 16 per process; the compiled-NLP cache is keyed by the NLP's hash, so a new weight runs on plain CasADi
   functions) and keeps it. The pool records which weights each worker has answered for

@@ -1,4 +1,4 @@
-"""The uncertainty set: how far the real helicopter may differ from the model the planner uses (issue 12).
+"""The uncertainty set: how far the real helicopter may differ from the model the planner uses.
 
 ``config/uncertainty.yaml`` gives a closed range for each uncertain quantity, each with a note saying where
 it comes from (or "assumed"):

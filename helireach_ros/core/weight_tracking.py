@@ -1,4 +1,4 @@
-"""Which gross weight to plan for, from the steady flight the planner node sees before a failure (issue 12).
+"""Which gross weight to plan for, from the steady flight the planner node sees before a failure.
 
 :func:`~helireach_ros.core.estimation.estimate_gross_weight` turns one steady flight (speed, climb rate, engine
 power) into the weight whose trim power is that power. On line the readings are noisy and the aircraft is not

@@ -1,4 +1,4 @@
-"""Robust verdicts for an envelope: which nominally safe nodes still land when the model is wrong (issue 12).
+"""Robust verdicts for an envelope: which nominally safe nodes still land when the model is wrong.
 
 For every node of an envelope's level slice that is ``safe`` (nominally: its plan replays to a landing
 within limits in the model it was made with), :func:`~helireach_ros.core.robust_verification.verify_robust`
