@@ -1,4 +1,4 @@
-"""What the benches' ``--baseline`` runs: the planner configuration before issue 13, and the load line they print.
+"""What the benches' ``--baseline`` runs: the legacy planner configuration, and the load line they print.
 
 Imported by the bench scripts (which run with ``bench/`` on ``sys.path``).
 """
@@ -15,7 +15,7 @@ from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.settings import PlannerSettings
 
 __all__ = [
-    "BEFORE_ISSUE_13",
+    "LEGACY_CONFIGURATION",
     "baseline_codegen",
     "baseline_settings",
     "loadavg_text",
@@ -24,24 +24,24 @@ __all__ = [
     "with_mumps",
 ]
 
-BEFORE_ISSUE_13 = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2, "closed_form_states": False}
-"""The warm-solver options before issue 13 (``bound_push``/``bound_frac`` were IPOPT's defaults) and its NLP,
-all six states as variables."""
+LEGACY_CONFIGURATION = {"warm_start_bound_push": 1e-6, "warm_bound_push": 1e-2, "closed_form_states": False}
+"""The legacy warm-solver options (``bound_push``/``bound_frac`` IPOPT's defaults) and the legacy NLP, all six
+states as variables."""
 
 
 def baseline_settings(settings: PlannerSettings) -> PlannerSettings:
-    """``settings`` with the warm-solver options and the NLP before issue 13."""
-    return settings.replace(**BEFORE_ISSUE_13)
+    """``settings`` with the legacy warm-solver options and NLP."""
+    return settings.replace(**LEGACY_CONFIGURATION)
 
 
 def six_state_settings(settings: PlannerSettings) -> PlannerSettings:
-    """``settings`` with all six states as NLP variables (``closed_form_states`` off): issue 13's NLP before
+    """``settings`` with all six states as NLP variables (``closed_form_states`` off): the NLP before
     distance and engine power went into closed form."""
     return settings.replace(closed_form_states=False)
 
 
 def baseline_codegen() -> CodegenSettings:
-    """Plain CasADi functions and MUMPS, as before issue 13."""
+    """Plain CasADi functions and MUMPS: the legacy configuration's NLP functions and linear solver."""
     return CodegenSettings(mode="off", linear_solver="mumps")
 
 

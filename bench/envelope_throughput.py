@@ -10,7 +10,7 @@ re-solved cold, solve counts, per-phase wall time; then, from a few sweep column
 how a node's time splits between IPOPT and the rest of ``plan`` (decode + CVODES replay). The machine's
 load average is printed too: other processes on a shared machine slow every number here.
 
-``--baseline`` runs, for each worker count, the configuration before issue 13 (legacy sweep: cold restart
+``--baseline`` runs, for each worker count, the legacy configuration (legacy sweep: cold restart
 after every not-safe node, every node replayed; the warm-solver options of then; plain CasADi functions; MUMPS; the
 planner's own answers, such as a failure on the ground decided without the NLP, are the same in both) and the
 current one, alternating ``--repeat`` times, and prints the ratio of their wall times (the comparison that holds on a
@@ -128,7 +128,7 @@ def main() -> None:
     parser.add_argument("--heights-ft", default="0:800:41")
     parser.add_argument("--speeds-kt", default="0:120:25")
     parser.add_argument("--airframe", default="uh60a_class")
-    parser.add_argument("--baseline", action="store_true", help="also run the configuration before issue 13")
+    parser.add_argument("--baseline", action="store_true", help="also run the legacy configuration")
     parser.add_argument("--repeat", type=int, default=1, help="with --baseline: alternating runs of each")
     arguments = parser.parse_args()
     airframe, settings = load_airframe(arguments.airframe), load_settings()

@@ -25,7 +25,7 @@ counted (and its own latency reported). Between failures the flag is false for l
 from the state at the failure follows; both are timed. The state and the false flag are streamed on a 20 ms
 schedule, as a vehicle streams them (not after every ``spin_once``, which flooded the queues), and a failure
 without any trajectory within 10 s is counted and reported, not fatal. ``--baseline`` also runs, in the same
-run, ``solver_workers:=0 live_rate:=0`` (the configuration before issue 10: solves on the node's thread, no
+run, ``solver_workers:=0 live_rate:=0`` (the legacy configuration: solves on the node's thread, no
 standby) and prints the ratio of its failure → first trajectory p50/p95 to the defaults'. Prints the command
 line and what it measured on this machine, with the load average.
 """
@@ -107,7 +107,7 @@ class Vehicle:
 
         On a schedule, not once per ``spin_once``: in the composed system ``spin_once`` returns after *one*
         callback, so publishing on every return streamed at ~1.3 kHz and filled every queue to its depth (the
-        true flag then waited behind ~10 queued false ones: ~40 ms of the composed latency before issue 10's fix).
+        true flag then waited behind ~10 queued false ones: ~40 ms of the composed latency before the fix).
         """
         now = time.perf_counter()
         deadline, next_publish = now + duration_s, now

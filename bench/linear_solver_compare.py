@@ -10,7 +10,7 @@ per-iteration IPOPT time, iterations, statuses, replay verdicts, and the ratio o
 measured in the same run, with the load average. ``--envelope`` also computes the 41 × 25 envelope with each, in
 this process, and compares every node.
 
-``--pairing structure`` gives the block LDL^T stop 21's structural pairs (``BLOCK_LDL_STRUCTURAL_PAIRS``).
+``--pairing structure`` gives the block LDL^T pairs chosen by the structure alone (``BLOCK_LDL_STRUCTURAL_PAIRS``).
 ``--dump DIR`` makes it write the first 400 KKT matrices it factorizes, with the inertia it reported, into DIR
 (``BLOCK_LDL_DUMPDIR``); ``--check-inertia DIR`` compares each with the inertia of its dense eigenvalues (numpy),
 the check that found the structural pairs' wrong inertia.

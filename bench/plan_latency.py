@@ -12,7 +12,7 @@ during a descent: the re-plans of lock-step closed-loop descents from 8 states (
 drag mismatch and noise), each warm from the plan being flown. Times are IPOPT wall time per solve; the
 replay, which follows every solve, is timed separately. Prints what it measured on this machine and the load average.
 
-``--baseline`` also runs the configuration before issue 13 (IPOPT's warm-solver options of then,
+``--baseline`` also runs the legacy configuration (IPOPT's warm-solver options of then,
 plain CasADi functions, MUMPS), the warm options alone, (verified, flyable) the six-state NLP, distance and engine
 power as NLP variables (``closed_form_states`` off), and the current NLP with MUMPS instead of the block LDL^T
 (:mod:`helireach_ros.core.block_ldl`), on the same states (each configuration warm-starts from its
@@ -72,7 +72,7 @@ def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str
     before, plain = baseline_settings(settings), baseline_codegen()
     if settings.method == "paper":  # its NLP has no closed-form states
         return [
-            ("before issue 13", before, plain),
+            ("legacy", before, plain),
             ("warm options, plain functions", settings, plain),
             ("warm options, compiled, MUMPS", settings, with_mumps(current[2])),
             current,
@@ -80,7 +80,7 @@ def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str
     six_states = six_state_settings(settings)
     mumps = with_mumps(current[2])
     return [
-        ("before issue 13", before, plain),
+        ("legacy", before, plain),
         ("warm options, six states, plain functions", six_states, plain),
         ("six states, compiled", six_states, mumps),
         ("closed form, compiled, MUMPS", settings, mumps),
@@ -231,7 +231,7 @@ def main() -> None:
     parser.add_argument("--states", type=int, default=60)
     parser.add_argument("--airframe", default="uh60a_class")
     parser.add_argument("--method", choices=("flyable", "verified", "paper", "all"), default="all")
-    parser.add_argument("--baseline", action="store_true", help="also run the configuration before issue 13")
+    parser.add_argument("--baseline", action="store_true", help="also run the legacy configuration")
     parser.add_argument(
         "--no-replans", action="store_true", help="skip the re-plans along closed-loop descents (flyable only)"
     )

@@ -133,7 +133,8 @@ def test_the_factorization_reports_the_inertia_and_solves_like_numpy(library, se
 def test_a_pair_on_a_near_zero_jacobian_entry_is_paired_again_by_value(library):
     """Constraint 0 reaches a variable (least connected, so structurally preferred) through a 1e-13 entry only.
 
-    With stop 21's structural pairs (``BLOCK_LDL_STRUCTURAL_PAIRS=1``) this reports 26 negative eigenvalues for 25.
+    With pairs chosen by the structure alone (``BLOCK_LDL_STRUCTURAL_PAIRS=1``) this reports 26 negative
+    eigenvalues for 25.
     """
     rng = np.random.default_rng(11)
     matrix = kkt_matrix(rng, 40, 25, weak_entry=1e-13)

@@ -40,7 +40,7 @@ def test_shipped_file_is_compact_3d_and_made_by_the_cli(shipped_3d):
     assert default_envelope_path().stat().st_size <= 4 * 1024 * nodes  # ~3.8 KB per node of stored plans
     command = shipped_3d.metadata["command"]
     assert command.startswith("helireach envelope compute") and "--airframe uh60a_class" in command
-    assert "--dask-local" in command  # computed on a Dask LocalCluster, as issue 10 asks
+    assert "--dask-local" in command  # computed on a Dask LocalCluster
     assert shipped_3d.complete and shipped_3d.is_3d
     assert shipped_3d.status.shape == (7, 41, 25)
     assert np.allclose(shipped_3d.climb_rates / FPM, [-2000, -1500, -1000, -500, 0, 750, 1500])

@@ -155,7 +155,8 @@ def test_warm_solver_options_keep_answers_and_save_iterations(uh60):
     """Issue 13: warm_start_bound_push 1e-9 and bound_push/bound_frac 1e-8 on the warm solver only.
 
     From the same neighbour plans, the new options give the same statuses and values (|ΔJ| ≤ 1e-5) as the
-    options before issue 13 in fewer IPOPT iterations in total; cold solves are untouched by them.
+    legacy warm-solver options (bench/baseline_config.py) in fewer IPOPT iterations in total; cold solves are
+    untouched by them.
     """
     current = PlannerSettings()
     before = current.replace(warm_start_bound_push=1e-6, warm_bound_push=1e-2)

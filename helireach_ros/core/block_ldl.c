@@ -18,7 +18,7 @@
  *
  * Debug switches (environment): BLOCK_LDL_VERBOSE, BLOCK_LDL_TIMES (a summary at exit), BLOCK_LDL_DUMPDIR (the
  * first 400 KKT matrices as text, for bench/linear_solver_compare.py --check-inertia), BLOCK_LDL_QUIET_PERTURB,
- * BLOCK_LDL_STRUCTURAL_PAIRS (stop 21's structural pairs, for comparison).
+ * BLOCK_LDL_STRUCTURAL_PAIRS (pairs chosen by the structure alone, for comparison).
  */
 #include <math.h>
 #include <pthread.h>

@@ -143,7 +143,7 @@ def compare_logged_plans(
         logged_control = [values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")]
         control = None if None in logged_control else np.array([float(value) for value in logged_control])
         delay = float(values["reaction_delay_s"]) if "reaction_delay_s" in values else None
-        # the weight the plan was made for (the planner node's estimate, issue 12; older logs: the airframe's)
+        # the weight the plan was made for (the planner node's estimate; older logs: the airframe's)
         weight = float(values.get("planned_gross_weight_n", airframe.gross_weight))
         solver = planner if weight == airframe.gross_weight else get_planner(airframe.with_conditions(weight), settings)
         # the model error the plan was made for (re-plans with estimate_disturbance; older logs: none)

@@ -8,7 +8,7 @@ whether a safe landing is reachable from there. The work runs in three phases:
    next node is warm-started from the previous node's plan, whatever its status (a failed node has
    no plan: the next one is cold). A start from a plan that is not ``safe`` is only a guess, made
    after an ``unsafe`` node of value ≥ ``GUESS_MIN_PREVIOUS_VALUE`` (otherwise the node is solved
-   cold, as before issue 13): it is kept (``warm_from_not_safe``) when it answers ``unsafe`` with a
+   cold, as the legacy sweep does): it is kept (``warm_from_not_safe``) when it answers ``unsafe`` with a
    value of at least ``NEAR_ZERO_VALUE`` (deep inside an unsafe band, where it saves the cold solve:
    a warm solve costs ~1/3 of a cold one); any other answer is replaced by a cold solve at once,
    since the re-check would need it and a false ``unsafe`` must not start the next node. A node on the
@@ -20,8 +20,8 @@ whether a safe landing is reachable from there. The work runs in three phases:
    whose status differs from a 4-neighbour is solved again cold (:func:`_checked`): ``unsafe`` from
    either start wins, otherwise the cold answer decides — such a node is ``safe`` only with a
    verified cold plan, so a warm start never carries an optimistic answer across the boundary. For
-   a node started from a not-safe plan the cold answer decides alone (what the sweep before issue 13
-   computed there). A node warm-started from a safe plan that answered ``unsafe`` is not re-solved:
+   a node started from a not-safe plan the cold answer decides alone (what the legacy sweep
+   computes there). A node warm-started from a safe plan that answered ``unsafe`` is not re-solved:
    ``unsafe`` wins whatever the cold answer, so that solve cannot change the verdict.
    Repeated until no such node is left unchecked.
 3. **Boundary refinement.** On every grid line between a safe and an unsafe node, the boundary is
@@ -147,7 +147,7 @@ class EnvelopeJob:
     codegen: CodegenSettings | None = None
     """Compiled NLP functions or not (performance only, not recorded; None: the worker's environment)."""
     legacy_sweep: bool = False
-    """The sweep before issue 13: cold restart after every not-safe node, not-safe nodes replayed, and a cold
+    """The legacy sweep: cold restart after every not-safe node, not-safe nodes replayed, and a cold
     re-check of every candidate. Same classification, more cold solves; kept for same-run comparisons
     (``bench/envelope_throughput.py --baseline``)."""
     climb_rates: tuple[float, ...] | None = None
