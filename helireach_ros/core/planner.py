@@ -99,7 +99,8 @@ class WarmStart:
 @dataclass(frozen=True)
 class ControlFunctionWarmStart:
     """A stored plan's control function to start the next solve from, when its NLP solution was not kept: the
-    planner flies it from the new problem's start to rebuild a primal point (multipliers zero).
+    planner flies it from the stored plan's own start to rebuild that plan's primal point (multipliers zero),
+    as close to the stored solution as the stored solution itself is to the new problem.
 
     Attributes:
         initial_state: the stored plan's state at its start (6, SI).
@@ -315,7 +316,7 @@ class LandingPlanner:
         transcription = self.transcription
         stored_controls = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
         if stored_controls is not None:
-            warm_start = None  # rebuilt below, from where the NLP starts
+            warm_start = None  # rebuilt below, once the delay has not decided the landing without the NLP
         if warm_start is not None and (
             warm_start.primal.shape != transcription.lbx.shape
             or warm_start.constraint_multipliers.shape != transcription.lbg.shape
