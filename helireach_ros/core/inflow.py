@@ -65,6 +65,8 @@ from enum import StrEnum
 
 import casadi as ca
 
+from helireach_ros.core.smooth import smooth_positive
+
 __all__ = [
     "GROUND_EFFECT_MIN_HEIGHT_RATIO",
     "LEISHMAN_QUARTIC",
@@ -163,10 +165,6 @@ def _step(value):
     return 0.5 * (1.0 + ca.tanh(value))
 
 
-def _positive(value, width: float):
-    return 0.5 * (value + ca.sqrt(value**2 + width**2))
-
-
 def axial_inflow_ratio(axial_ratio):
     """ν̂_A(x): the induced velocity in axial flight over v_h (the module docstring's axial curve).
 
@@ -176,11 +174,11 @@ def axial_inflow_ratio(axial_ratio):
     x = axial_ratio
     # Each branch is evaluated at an argument held (smoothly) inside its own range, where its weight is not
     # negligible, so that no branch overflows where the steps give it a zero weight (0 · inf would be NaN).
-    climb_x = _positive(x + 0.5, 1e-3) - 0.5  # = x above −0.45, where the climb branch has weight
+    climb_x = smooth_positive(x + 0.5, 1e-3) - 0.5  # = x above −0.45, where the climb branch has weight
     climb = 1.0 / (climb_x / 2.0 + ca.sqrt(climb_x**2 / 4.0 + 1.0))  # −x/2 + √(x²/4 + 1), no cancellation
     kappa_fit, *coefficients = LEISHMAN_QUARTIC
     quartic = (kappa_fit + sum(k * x ** (i + 1) for i, k in enumerate(coefficients))) / kappa_fit
-    windmill_x = -2.0 - _positive(-2.0 - x, 1e-3)  # ≤ −2, = x below −2.05
+    windmill_x = -2.0 - smooth_positive(-2.0 - x, 1e-3)  # ≤ −2, = x below −2.05
     windmill = 1.0 / (-windmill_x / 2.0 + ca.sqrt(windmill_x**2 / 4.0 - 1.0))  # −x/2 − √(x²/4 − 1)
     to_climb = _step(x / _JOIN_WIDTH)
     to_quartic = _step((x - _QUARTIC_TO_WINDMILL) / _JOIN_WIDTH)
@@ -242,7 +240,7 @@ def ground_effect_factor(rotor_height_over_radius, edgewise_over_induced=0.0):
         edgewise_over_induced: U_T / ν, the in-plane speed over the induced velocity out of ground effect.
     """
     floor = GROUND_EFFECT_MIN_HEIGHT_RATIO
-    height = floor + _positive(rotor_height_over_radius - floor, 0.01)
+    height = floor + smooth_positive(rotor_height_over_radius - floor, 0.01)
     return 1.0 - (1.0 / (4.0 * height)) ** 2 / (1.0 + edgewise_over_induced**2)
 
 

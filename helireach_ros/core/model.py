@@ -11,7 +11,7 @@ Control u = (C_T, θ): thrust coefficient and pitch angle (rad, positive nose do
     \\dot\\Omega &= \\frac{1}{I_R \\Omega}\\Big(P - \\frac{1}{\\eta} \\rho A (\\Omega R)^3 C_P\\Big), \\quad
         C_P = \\tfrac18 \\sigma c_d + C_T \\lambda, \\quad
         \\lambda = \\frac{v\\sin\\theta - y\\cos\\theta + \\nu}{\\Omega R}, \\quad \\nu = \\Omega R \\sqrt{C_T/2}
-        \\ \\text{(the paper's rotor; the default rotor model below)} \\\\
+        \\ \\text{(the paper's rotor; the momentum rotor below)} \\\\
     \\dot h &= -y, \\quad \\dot z = v, \\quad \\dot P = -P/\\kappa
 
 Deviations from the paper, on purpose:
@@ -20,12 +20,12 @@ Deviations from the paper, on purpose:
 * √C_T, 1/Ω and V_f = √(y² + v²) use smooth guarded forms (below) so the NLP has finite
   derivatives at C_T = 0, Ω → 0 and V_f = 0; the guards change values by < 1e-6 relative in the
   flight envelope;
-* the rotor's aerodynamics are the airframe's :class:`~helireach_ros.core.inflow.RotorModel`: by default
-  momentum-theory induced velocity in forward flight, climb and descent with an empirical vortex-ring bridge,
+* the rotor's aerodynamics are the airframe's :class:`~helireach_ros.core.inflow.RotorModel`: either the paper's
+  hover induced velocity at every speed (its U_T defined but unused;
+  :data:`~helireach_ros.core.inflow.PAPER_ROTOR_MODEL`, what the shipped airframes and the ``paper`` method use),
+  or momentum-theory induced velocity in forward flight, climb and descent with an empirical vortex-ring bridge,
   ground effect, an induced power factor and profile power that grows with the advance ratio
-  (:mod:`~helireach_ros.core.inflow`, :func:`_rotor_terms`). The paper's hover induced velocity at every speed
-  (its U_T defined but unused) is :data:`~helireach_ros.core.inflow.PAPER_ROTOR_MODEL`, which the ``paper``
-  method uses.
+  (:mod:`~helireach_ros.core.inflow`, :func:`_rotor_terms`).
 """
 
 from __future__ import annotations
@@ -41,6 +41,7 @@ import numpy as np
 
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.inflow import InflowModel, induced_velocity, momentum_inflow_ratio, momentum_root_residual
+from helireach_ros.core.smooth import smooth_positive
 
 __all__ = [
     "CONTROL_NAMES",
@@ -78,16 +79,6 @@ NO_DISTURBANCE.flags.writeable = False
 _THRUST_GUARD = 1e-7  # C_T below which √C_T is smoothed (trim C_T is ~6e-3)
 _SPEED_GUARD = 1e-2  # m/s added in quadrature to V_f
 _ROTOR_GUARD_RATIO = 0.05  # 1/Ω smoothed below 5 % of Ω₀, far outside any rotor-speed limit
-
-
-def smooth_positive(value, width: float):
-    """A smooth, strictly positive stand-in for max(value, 0).
-
-    .. math:: s(x) = \\tfrac12\\big(x + \\sqrt{x^2 + w^2}\\big)
-
-    Equal to ``value`` to within ``w²/(4x)`` for ``x ≫ w``, and ``w/2`` at 0.
-    """
-    return 0.5 * (value + ca.sqrt(value**2 + width**2))
 
 
 @dataclass(frozen=True)

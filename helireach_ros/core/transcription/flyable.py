@@ -23,7 +23,7 @@ and changes what a plan may be:
   at contact, with the rotor within its limits until then.
 * **No ground skims.** Below the commit height h_c the path may not climb:
   :math:`y_i + M\\,s(h_i - h_c) \\ge 0` at every collocation point, with s the smooth positive part
-  (:func:`~helireach_ros.core.model.smooth_positive`, width 5 cm) and M = 10 s⁻¹: below h_c the descent
+  (:func:`~helireach_ros.core.smooth.smooth_positive`, width 5 cm) and M = 10 s⁻¹: below h_c the descent
   rate is non-negative (to within M·s, < 1.3 cm/s half a metre below h_c); above it, climbing is
   allowed. A skim that dips below h_c and climbs away is infeasible; the replay checks the rule on the
   integrated path.
@@ -44,7 +44,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from helireach_ros.core.model import smooth_positive
+from helireach_ros.core.smooth import smooth_positive
 from helireach_ros.core.transcription.base import DecodedPlan
 from helireach_ros.core.transcription.verified import _TIME_SCALE, VerifiedTranscription
 
