@@ -28,7 +28,7 @@ setup(
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config", _files("config/*.yaml")),
         ("share/" + package_name + "/config/airframes", _files("config/airframes/*.yaml")),
-        ("share/" + package_name + "/config/envelopes", _files("config/envelopes/*")),
+        ("share/" + package_name + "/data/envelopes", _files("data/envelopes/*")),
         ("share/" + package_name + "/config/scenarios", _files("config/scenarios/*.yaml")),
         ("share/" + package_name + "/msg_docs", _files("msg_docs/*.md")),
     ],

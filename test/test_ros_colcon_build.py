@@ -60,7 +60,7 @@ def test_colcon_build_installs_the_package_its_scripts_and_data(tmp_path: Path) 
         "config/planner.yaml",
         "config/scenarios/demo_500ft_75kt.yaml",
         "config/airframes/uh60a_class.yaml",
-        "config/envelopes/uh60a_class_total_power_loss.npz",
+        "data/envelopes/uh60a_class_total_power_loss.npz",
     ):
         assert (share / relative).is_file(), relative
     assert sorted(path.name for path in (share / "msg_docs").glob("*.md")), "msg_docs not installed"

@@ -11,7 +11,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["PACKAGE_NAME", "config_path", "share_directories", "source_root"]
+__all__ = ["PACKAGE_NAME", "config_path", "data_path", "share_directories", "source_root"]
 
 PACKAGE_NAME = "helireach_ros"
 
@@ -36,7 +36,7 @@ def share_directories() -> list[Path]:
 
 
 def config_path(relative: str | os.PathLike[str]) -> Path:
-    """Finds a configuration file by a path relative to ``config/`` (or an explicit path).
+    """Finds a hand-written configuration file by a path relative to ``config/`` (or an explicit path).
 
     Args:
         relative: e.g. ``"airframes/uh60a_class.yaml"``, or an existing file path.
@@ -47,13 +47,27 @@ def config_path(relative: str | os.PathLike[str]) -> Path:
     Raises:
         FileNotFoundError: naming every place looked in.
     """
+    return _find("config", relative)
+
+
+def data_path(relative: str | os.PathLike[str]) -> Path:
+    """Finds a shipped generated data file (e.g. an envelope) by a path relative to ``data/`` (or an explicit path).
+
+    Raises:
+        FileNotFoundError: naming every place looked in.
+    """
+    return _find("data", relative)
+
+
+def _find(folder: str, relative: str | os.PathLike[str]) -> Path:
     explicit = Path(relative).expanduser()
     if explicit.is_file():
         return explicit
     searched = []
     for share in share_directories():
-        candidate = share / "config" / relative
+        candidate = share / folder / relative
         searched.append(str(candidate))
         if candidate.is_file():
             return candidate
-    raise FileNotFoundError(f"configuration file {str(relative)!r} not found; looked in: {', '.join(searched)}")
+    kind = "configuration" if folder == "config" else "data"
+    raise FileNotFoundError(f"{kind} file {str(relative)!r} not found; looked in: {', '.join(searched)}")

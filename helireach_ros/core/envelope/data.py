@@ -67,7 +67,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from helireach_ros.core.envelope.domain import ValidityDomain
-from helireach_ros.core.resources import config_path, source_root
+from helireach_ros.core.resources import data_path, source_root
 from helireach_ros.core.units import FT, KT
 
 if TYPE_CHECKING:
@@ -105,7 +105,7 @@ FORMAT_VERSION_3D = 2
 """Format version of 3-D files (climb rate × height × speed): ``climb_rates`` and ``boundary_slice`` arrays."""
 _READABLE_VERSIONS = {FORMAT_VERSION: False, FORMAT_VERSION_3D: True}  # version -> holds a climb axis
 DEFAULT_ENVELOPE = "envelopes/uh60a_class_total_power_loss.npz"
-"""The shipped envelope, relative to ``config/``."""
+"""The shipped envelope, relative to ``data/`` (generated data; ``config/`` holds hand-written input)."""
 
 STATUS_CODES = {"safe": 0, "unsafe": 1, "unverified": 2, "failed": 3, "no_trim": 4}
 """Per-cell status as stored in the file (int8). ``no_trim``: no steady flight at that (speed, climb rate)."""
@@ -891,6 +891,6 @@ def load_envelope(
 def default_envelope_path() -> Path:
     """The shipped ``uh60a_class`` total-power-loss envelope (installed share or source tree)."""
     try:
-        return config_path(DEFAULT_ENVELOPE)
+        return data_path(DEFAULT_ENVELOPE)
     except FileNotFoundError:
-        return source_root() / "config" / DEFAULT_ENVELOPE
+        return source_root() / "data" / DEFAULT_ENVELOPE
