@@ -64,6 +64,21 @@ def context(no_ros_discovery):
     rclpy.try_shutdown(context=fresh)
 
 
+@pytest.fixture(scope="session", autouse=True)
+def envelope_solver_state_cache(tmp_path_factory: pytest.TempPathFactory):
+    """The envelopes' solver-state cache of this run (this process and its children), not the user's: a test sees
+    the shipped envelope as a fresh installation does (no cached solver state)."""
+    from helireach_ros.core.envelope.data import SOLVER_STATE_CACHE_ENV
+
+    previous = os.environ.get(SOLVER_STATE_CACHE_ENV)
+    os.environ[SOLVER_STATE_CACHE_ENV] = str(tmp_path_factory.mktemp("envelope_solver_state"))
+    yield
+    if previous is None:
+        os.environ.pop(SOLVER_STATE_CACHE_ENV, None)
+    else:
+        os.environ[SOLVER_STATE_CACHE_ENV] = previous
+
+
 @pytest.fixture(scope="module")
 def airframe() -> Airframe:
     """The default airframe, as shipped."""

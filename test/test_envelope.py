@@ -22,17 +22,21 @@ from helireach_ros.core.envelope.compute import EnvelopeJob, _sweep_column, comp
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION,
+    FORMAT_VERSION_ANSWERS,
+    SOLVER_STATE_ARRAYS,
+    SOLVER_STATE_CACHE_ENV,
     STATUS_CODES,
     Envelope,
     EnvelopeError,
     load_envelope,
     read_envelope_file,
     save_envelope,
+    solver_state_path,
 )
 from helireach_ros.core.envelope.grid import parse_list, parse_range
 from helireach_ros.core.envelope.plot import boundary_geometry, plot_envelope
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import ControlFunctionWarmStart, get_planner
+from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart, get_planner
 from helireach_ros.core.units import FT, KT
 
 HEIGHTS_FT = "0:600:4"
@@ -90,7 +94,7 @@ def test_round_trip_keeps_every_array_and_the_metadata(small_file, small, tmp_pa
 
 def test_metadata_describes_the_computation(small, airframe, settings):
     metadata = small.metadata
-    assert metadata["format"] == FORMAT_NAME and metadata["format_version"] == FORMAT_VERSION
+    assert metadata["format"] == FORMAT_NAME and metadata["format_version"] == FORMAT_VERSION_ANSWERS
     assert metadata["airframe"]["digest"] == airframe.digest()
     assert metadata["airframe"]["rotor_radius"] == airframe.rotor_radius
     assert metadata["settings"]["intervals"] == settings.intervals
@@ -172,6 +176,51 @@ def test_a_stored_control_function_rebuilds_the_stored_solution(small, airframe,
     # a control function of another mesh cannot be rebuilt: the solve is cold, not wrong
     other = ControlFunctionWarmStart(node_state.as_array(), stored.control_times[:-2], stored.control_values[:, :-2])
     assert not planner.plan(state, warm_start=other).solver.warm_started
+
+
+def test_the_file_holds_answers_and_control_functions_and_the_cache_the_solver_state(small_file, small, tmp_path):
+    """A complete file leaves IPOPT's solution out (it is most of the bytes and changes with the NLP): it goes to
+    the user cache, keyed by the file's checksum, and comes back on load; without it, a stored plan's warm start is
+    its control function, flown from the node's state."""
+    with np.load(small_file) as archive:
+        assert not set(SOLVER_STATE_ARRAYS) & set(archive.files)
+        assert archive["plan_control_times"].dtype == np.float32 and archive["plan_initial_state"].shape == (4, 3, 6)
+    cached = solver_state_path(small.checksum)
+    assert cached.is_file() and small.solver_state is not None
+    assert isinstance(small.stored_plan(3, 2).warm_start, WarmStart)
+    node = initial_state_after_failure(load_airframe("uh60a_class"), small.heights[3], small.speeds[2])
+    assert np.allclose(small.arrays["plan_initial_state"][3, 2], node.as_array(), rtol=0, atol=1e-9)
+    # a corrupt cache file is ignored (a warning), never trusted: the file alone still answers
+    cached.write_bytes(cached.read_bytes()[:-100])
+    alone = load_envelope(small_file)
+    assert alone.solver_state is None and alone.envelope_id == small.envelope_id
+    stored = alone.stored_plan(3, 2)
+    assert isinstance(stored.warm_start, ControlFunctionWarmStart)
+    assert np.array_equal(stored.warm_start.initial_state, small.arrays["plan_initial_state"][3, 2])
+    # saving it again (e.g. with a robust verdict) writes today's format and restores the cache
+    again = save_envelope(small, tmp_path / "again.npz")
+    assert load_envelope(again).solver_state is not None
+
+
+def test_an_envelope_of_the_previous_format_keeps_loading(small, tmp_path):
+    """A version-2 file (solver state inside, no initial states) loads, and its plans warm-start from the solver
+    state; it cannot be turned into today's format (no initial states) and says how to get one."""
+    arrays = {name: array for name, array in small.arrays.items() if name != "plan_initial_state"}
+    arrays |= {name: np.asarray(array, np.float32) for name, array in small.solver_state.items()}
+    old = Envelope(arrays, small.metadata | {"format_version": FORMAT_VERSION})
+    path = save_envelope(old, tmp_path / "old.npz")
+    loaded = load_envelope(path)
+    assert loaded.format_version == FORMAT_VERSION and isinstance(loaded.stored_plan(3, 2).warm_start, WarmStart)
+    assert np.array_equal(loaded.status, small.status)
+    with pytest.raises(EnvelopeError, match="recompute it"):
+        loaded.answers()
+
+
+def test_the_solver_state_cache_follows_its_environment_variable(small, tmp_path, monkeypatch):
+    monkeypatch.setenv(SOLVER_STATE_CACHE_ENV, str(tmp_path / "cache"))
+    assert solver_state_path(small.checksum).parent == tmp_path / "cache"
+    save_envelope(small, tmp_path / "copy.npz")
+    assert solver_state_path(small.checksum).is_file()
 
 
 # --- refusing bad files ----------------------------------------------------------------------------------
@@ -513,7 +562,7 @@ def test_plot_writes_the_diagram_with_a_track(small, tmp_path):
 
 
 def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airframe, settings):
-    """Issue 13: the sweep no longer restarts cold after every not-safe node; the classification is unchanged.
+    """The sweep does not restart cold after every not-safe node; the classification is unchanged.
 
     A grid through the hover unsafe band (50 ft steps) has nodes deep inside the band, whose warm answers
     from the unsafe node below are kept, and nodes near its edges, which are solved cold as before.
@@ -548,7 +597,7 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     assert np.array_equal(replayed[solved], (current.status == "safe")[solved]), current.status
     assert current.status[0, 1] == "unsafe" and not solved[0, 1] and replayed[0, 1]
     # such a node stores no plan, and the nearest plan (warm start, fallback) near it is a neighbour's, flyable
-    assert np.all(np.isnan(current.arrays["plan_primal"][0, 1])) and not current.has_stored_plan(0, 1)
+    assert np.all(np.isnan(current.arrays["plan_control_times"][0, 1])) and not current.has_stored_plan(0, 1)
     assert current.has_stored_plan(0, 0)  # the safe ground node at 0 kt was solved: its plan is stored
     nearest = current.nearest_plan(0.0, speeds[1])
     assert (nearest.height, nearest.speed) != (0.0, speeds[1]) and np.all(np.isfinite(nearest.control_times))

@@ -22,6 +22,7 @@ from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob,
 from helireach_ros.core.envelope.data import (
     FORMAT_VERSION,
     FORMAT_VERSION_3D,
+    FORMAT_VERSION_ANSWERS,
     STATUS_CODES,
     Envelope,
     EnvelopeError,
@@ -80,13 +81,13 @@ def test_a_2d_file_still_loads_and_queries_as_before(tmp_path):
 
 
 def test_a_2d_file_still_loads_and_queries_level_flight_only(tmp_path):
-    """A level slice of the shipped 3-D file written as a 2-D file (format version 1, the layout of every file
-    before the climb axis) loads, answers as that slice, and says nothing beyond its level-trim tolerance."""
+    """A level slice of the shipped 3-D file written as a 2-D file loads, answers as that slice, and says nothing
+    beyond its level-trim tolerance."""
     shipped = read_envelope_file(default_envelope_path())
     level = shipped.slice(shipped.nearest_slice(0.0))
     path = save_envelope(level, tmp_path / "level.npz")
     flat = read_envelope_file(path)
-    assert flat.metadata["format_version"] == FORMAT_VERSION and flat.status.ndim == 2 and not flat.is_3d
+    assert flat.format_version == FORMAT_VERSION_ANSWERS and flat.status.ndim == 2 and not flat.is_3d
     for height_ft, speed_kt in ((200, 5), (700, 100), (300, 40), (20, 90)):
         answer = flat.query(height_ft * FT, speed_kt * KT)
         assert answer.status == shipped.query(height_ft * FT, speed_kt * KT, 0.0).status
@@ -195,10 +196,12 @@ def test_broken_version_or_domain_metadata_is_refused_with_a_message(tmp_path):
     flat = synthetic_envelope(SAFE)
     with pytest.raises(EnvelopeError, match="validity_domain"):
         Envelope(flat.arrays, flat.metadata | {"validity_domain": {"climb_rate_tolerance": -1.0}})
-    for version in ([1], "2", 3):
+    for version in ([1], "2", 4):
         path = save_envelope(Envelope(flat.arrays, flat.metadata | {"format_version": version}), tmp_path / "v.npz")
         with pytest.raises(EnvelopeError, match="format version"):
             read_envelope_file(path)
+    with pytest.raises(EnvelopeError, match="plan_initial_state"):  # today's format rebuilds plans from it
+        Envelope(flat.arrays, flat.metadata | {"format_version": 3})
 
 
 # --- the computation (real IPOPT) ------------------------------------------------------------------------
@@ -257,7 +260,7 @@ def same_results(first: Envelope, second: Envelope) -> list[str]:
 def test_cli_writes_a_3d_file_with_its_axis_command_and_no_trim_nodes(computed_3d, airframe):
     envelope = load_envelope(computed_3d)
     metadata = envelope.metadata
-    assert metadata["format_version"] == FORMAT_VERSION_3D and envelope.status.shape == (2, 3, 3)
+    assert metadata["format_version"] == FORMAT_VERSION_ANSWERS and envelope.status.shape == (2, 3, 3)
     assert metadata["climb_rates_fpm"] == [-4000, 0] and metadata["grid"]["climb_rates_fpm"] == CLIMBS_FPM
     assert metadata["validity_domain"]["climb_rates"] == pytest.approx([-4000 * FPM, 0.0])
     assert f"--climb-rates-fpm={CLIMBS_FPM}" in metadata["command"]
@@ -283,7 +286,7 @@ def test_each_slice_is_the_2d_envelope_of_its_climb_rate(computed_3d, job_3d):
     envelope = load_envelope(computed_3d)
     level = compute_envelope(EnvelopeJob(job_3d.airframe, job_3d.settings, 0.0, job_3d.heights, job_3d.speeds))
     assert same_results(envelope.slice(1), level) == []
-    assert level.metadata["format_version"] == FORMAT_VERSION and not level.is_3d
+    assert level.metadata["format_version"] == FORMAT_VERSION_ANSWERS and not level.is_3d
 
 
 def test_dask_local_cluster_equals_the_serial_run(computed_3d, job_3d, tmp_path):

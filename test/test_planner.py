@@ -152,7 +152,7 @@ def test_warm_start_from_another_nlp_is_refused(uh60, cruise_plan):
 
 
 def test_warm_solver_options_keep_answers_and_save_iterations(uh60):
-    """Issue 13: warm_start_bound_push 1e-9 and bound_push/bound_frac 1e-8 on the warm solver only.
+    """warm_start_bound_push 1e-9 and bound_push/bound_frac 1e-8 on the warm solver only.
 
     From the same neighbour plans, the new options give the same statuses and values (|ΔJ| ≤ 1e-5) as the
     legacy warm-solver options (bench/baseline_config.py) in fewer IPOPT iterations in total; cold solves are
@@ -200,7 +200,7 @@ def _six_state_vector(planner, plan) -> np.ndarray:
 
 @pytest.mark.parametrize("method", ["flyable", "verified"])
 def test_closed_form_states_solve_the_six_state_nlp(uh60, method):
-    """Issue 13: distance and engine power in closed form (``closed_form_states``, the default).
+    """Distance and engine power in closed form (``closed_form_states``, the default).
 
     The closed-form plan, with its z and P put back as variables, satisfies every equation and bound of the
     six-state NLP (the z and P collocation equations exactly), and both NLPs give the same statuses from cold

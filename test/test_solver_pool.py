@@ -15,7 +15,7 @@ import pytest
 
 from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
 from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlan, WarmStart, get_planner, plan_landing
+from helireach_ros.core.planner import ControlFunctionWarmStart, LandingPlan, WarmStart, get_planner, plan_landing
 from helireach_ros.core.solver_pool import (
     PRIORITY_FAILURE,
     PRIORITY_LIVE,
@@ -77,6 +77,11 @@ def test_the_pool_answers_as_the_planner_in_process(pool, airframe, settings, he
     assert remote.replay.lands_within_limits == local.replay.lands_within_limits
     warm = pool.plan(state, local.warm_start)
     assert warm.solver.warm_started and warm.status == local.status
+    # a stored plan's control function crosses the process boundary too (what an envelope file without the
+    # solver state offers), and the worker rebuilds its warm start
+    stored = ControlFunctionWarmStart(state, local.control_times, local.control_values)
+    rebuilt = pool.plan(state, stored)
+    assert rebuilt.solver.warm_started and rebuilt.status == local.status
 
 
 def test_the_pool_plans_for_the_requested_disturbance(pool, airframe, settings) -> None:

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from helireach_ros.core.planner import LandingPlan, WarmStart
+from helireach_ros.core.planner import ControlFunctionWarmStart, LandingPlan, WarmStart
 
 __all__ = [
     "WARM_START_NEIGHBOURHOOD",
@@ -42,6 +42,9 @@ __all__ = [
     "failure_now_state",
     "solve_with_cold_check",
 ]
+
+AnyWarmStart = WarmStart | ControlFunctionWarmStart | None
+"""A solve's start: a previous solution, a stored plan's control function (the envelope's), or cold."""
 
 
 @dataclass(frozen=True)
@@ -117,7 +120,7 @@ class LiveVerdict:
 
 
 def solve_with_cold_check(
-    solve: Callable[[np.ndarray, WarmStart | None], LandingPlan], state: np.ndarray, warm_start: WarmStart | None
+    solve: Callable[[np.ndarray, AnyWarmStart], LandingPlan], state: np.ndarray, warm_start: AnyWarmStart
 ) -> LandingPlan:
     """A warm solve, and a cold one if the warm plan is not safe. The cold plan wins if it is safe, or if the warm
     solve did not converge and the cold one did (a failed solve is no answer; an unsafe cold plan is one)."""
@@ -157,7 +160,7 @@ class LiveEvaluator:
     """
 
     def __init__(
-        self, settings: LiveSettings, solve: Callable[[np.ndarray, WarmStart | None], LandingPlan] | None = None
+        self, settings: LiveSettings, solve: Callable[[np.ndarray, AnyWarmStart], LandingPlan] | None = None
     ) -> None:
         self.settings = settings
         self._solve = solve
@@ -187,8 +190,8 @@ class LiveEvaluator:
         return self._last_started_ns is None or now_ns - self._last_started_ns >= self.settings.period_ns
 
     def prepare(
-        self, measured_state: np.ndarray, state_stamp_ns: int, now_ns: int, fallback_warm_start: WarmStart | None = None
-    ) -> tuple[np.ndarray, WarmStart | None] | None:
+        self, measured_state: np.ndarray, state_stamp_ns: int, now_ns: int, fallback_warm_start: AnyWarmStart = None
+    ) -> tuple[np.ndarray, AnyWarmStart] | None:
         """Starts an evaluation: (the engine-fails-now state, the warm start), or None if the state is too old.
 
         Args:
@@ -236,7 +239,7 @@ class LiveEvaluator:
         state_stamp_ns: int,
         now_ns: int,
         clock_ns: Callable[[], int],
-        fallback_warm_start: WarmStart | None = None,
+        fallback_warm_start: AnyWarmStart = None,
     ) -> LiveVerdict | None:
         """One evaluation, blocking: :meth:`prepare`, the solve, :meth:`record` (None if the state is too old)."""
         if self._solve is None:

@@ -47,7 +47,7 @@ import numpy as np
 
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
-from helireach_ros.core.planner import LandingPlan, WarmStart
+from helireach_ros.core.planner import ControlFunctionWarmStart, LandingPlan, WarmStart
 from helireach_ros.core.settings import PlannerSettings
 
 __all__ = [
@@ -111,6 +111,11 @@ class _SolveRequest:
     reaction_delay_s: float | None = None
     gross_weight: float = math.nan  # N; NaN = the worker's airframe's
     disturbance: np.ndarray | None = None  # (d_y, d_v, d_Ω); None = the model as it is
+    stored_controls: ControlFunctionWarmStart | None = None  # a stored plan to warm-start from (not warm_start)
+
+    @property
+    def start(self) -> WarmStart | ControlFunctionWarmStart | None:
+        return self.warm_start if self.warm_start is not None else self.stored_controls
 
 
 @dataclass(frozen=True)
@@ -151,9 +156,9 @@ def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSe
                 disturbance=request.disturbance,
             )
             if request.cold_check:
-                plan = solve_with_cold_check(solve, request.state, request.warm_start)
+                plan = solve_with_cold_check(solve, request.state, request.start)
             else:
-                plan = solve(request.state, request.warm_start)
+                plan = solve(request.state, request.start)
             reply = _SolveReply(plan, "")
         except (ValueError, RuntimeError) as error:
             reply = _SolveReply(None, f"{type(error).__name__}: {error}")
@@ -227,7 +232,7 @@ class SolverPool:
     def submit(
         self,
         state: np.ndarray,
-        warm_start: WarmStart | None = None,
+        warm_start: WarmStart | ControlFunctionWarmStart | None = None,
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
         cold_check: bool = False,
@@ -252,9 +257,11 @@ class SolverPool:
         delay = None if reaction_delay_s is None else float(reaction_delay_s)
         weight = self.airframe.gross_weight if gross_weight is None else float(gross_weight)
         disturbance = None if disturbance is None else np.asarray(disturbance, dtype=float).reshape(-1)
+        stored = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
         request = _SolveRequest(
-            np.asarray(state, dtype=float).reshape(-1), warm_start, cold_check, control, delay, weight, disturbance
-        )
+            np.asarray(state, dtype=float).reshape(-1), None if stored else warm_start, cold_check, control, delay,
+            weight, disturbance, stored,
+        )  # fmt: skip
         payload = encode_dataclass(request)
         job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority, gross_weight=weight)
         with self._lock:
@@ -267,7 +274,7 @@ class SolverPool:
     def plan(
         self,
         state: np.ndarray,
-        warm_start: WarmStart | None = None,
+        warm_start: WarmStart | ControlFunctionWarmStart | None = None,
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
         **request: Any,

@@ -65,9 +65,9 @@ from helireach_ros import __version__
 from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
-    FORMAT_VERSION,
-    FORMAT_VERSION_3D,
+    FORMAT_VERSION_ANSWERS,
     PENDING,
+    PLAN_STORAGE,
     STATUS_CODES,
     Envelope,
     EnvelopeError,
@@ -180,7 +180,8 @@ class EnvelopeJob:
 
 @dataclass(frozen=True)
 class _Solution:
-    """One solve at one point, reduced to what the envelope stores (plans as float32)."""
+    """One solve at one point, reduced to what the envelope stores (the solver state and the control function as
+    float32, the initial state as float64)."""
 
     status: int
     value: float
@@ -196,6 +197,7 @@ class _Solution:
     control_times: np.ndarray | None = None
     control_values: np.ndarray | None = None
     control_interpolation: str = ""
+    initial_state: np.ndarray | None = None  # (6,) SI: the state at the failure the plan starts from
     warm_from_not_safe: bool = False
     point_time_ms: float = 0.0  # solve + decode + replay in the task (phase accounting; not stored)
     point_cpu_ms: float = 0.0  # the same in CPU time of the worker (less sensitive to other load; not stored)
@@ -292,6 +294,7 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
         control_times=plan.control_times.astype(np.float32),
         control_values=plan.control_values.astype(np.float32),
         control_interpolation=plan.control_interpolation,
+        initial_state=np.asarray(plan.initial_state, np.float64),
         point_time_ms=1e3 * (time.perf_counter() - started),
         point_cpu_ms=1e3 * (time.process_time() - started_cpu),
     )
@@ -588,10 +591,11 @@ class _EnvelopeState:
         plan_fields = {
             "plan_primal": "primal", "plan_bound_multipliers": "bound_multipliers",
             "plan_constraint_multipliers": "constraint_multipliers", "plan_control_times": "control_times",
-            "plan_control_values": "control_values",
+            "plan_control_values": "control_values", "plan_initial_state": "initial_state",
         }  # fmt: skip
         for name, attribute in plan_fields.items():
-            array = np.full(shape + sizes[attribute], np.nan, np.float32)
+            dtype = np.float64 if name == "plan_initial_state" else np.float32
+            array = np.full(shape + sizes[attribute], np.nan, dtype)
             for cell, solution in self.solutions.items():
                 stored = getattr(solution, attribute)
                 if stored is not None and stored.shape == sizes[attribute]:
@@ -615,8 +619,11 @@ class _EnvelopeState:
         interpolation = envelope.metadata.get("control_interpolation", "")
         for row, column in zip(*np.nonzero(arrays["status_code"] != PENDING), strict=True):
             cell = (int(row), int(column))
-            primal = arrays["plan_primal"][cell]
+            # a partial file holds the solver state (resume warm-starts from it); a complete one may not
+            primal = arrays["plan_primal"][cell] if "plan_primal" in arrays else np.full(0, np.nan)
             has_plan = bool(np.all(np.isfinite(primal))) and primal.size > 0
+            times = arrays["plan_control_times"][cell]
+            has_controls = bool(np.all(np.isfinite(times))) and times.size > 0 and "plan_initial_state" in arrays
             state.solutions[cell] = _Solution(
                 status=int(arrays["status_code"][cell]),
                 value=float(arrays["value"][cell]),
@@ -629,9 +636,10 @@ class _EnvelopeState:
                 primal=primal.copy() if has_plan else None,
                 bound_multipliers=arrays["plan_bound_multipliers"][cell].copy() if has_plan else None,
                 constraint_multipliers=arrays["plan_constraint_multipliers"][cell].copy() if has_plan else None,
-                control_times=arrays["plan_control_times"][cell].copy() if has_plan else None,
-                control_values=arrays["plan_control_values"][cell].copy() if has_plan else None,
-                control_interpolation=interpolation if has_plan else "",
+                control_times=times.copy() if has_controls else None,
+                control_values=arrays["plan_control_values"][cell].copy() if has_controls else None,
+                control_interpolation=interpolation if has_controls else "",
+                initial_state=arrays["plan_initial_state"][cell].copy() if has_controls else None,
                 warm_from_not_safe=bool(arrays[EXTRA_NODE_ARRAY][cell]) if EXTRA_NODE_ARRAY in arrays else False,
             )
         state.cold_checked = arrays["cold_checked"].copy()
@@ -649,15 +657,17 @@ class _EnvelopeState:
 
 
 def _plan_sizes(solutions: Iterable[_Solution]) -> dict[str, tuple[int, ...]]:
+    sizes: dict[str, tuple[int, ...]] = {}
     for solution in solutions:
-        if solution.primal is not None:
-            return {
-                name: getattr(solution, name).shape
-                for name in ("primal", "bound_multipliers", "constraint_multipliers", "control_times", "control_values")
-            }
-    return {name: (0,) for name in ("primal", "bound_multipliers", "constraint_multipliers", "control_times")} | {
-        "control_values": (2, 0)
-    }
+        if solution.primal is not None and "primal" not in sizes:
+            sizes |= {name: getattr(solution, name).shape for name in ("primal", "bound_multipliers",
+                                                                       "constraint_multipliers")}  # fmt: skip
+        if solution.control_times is not None and "control_times" not in sizes:
+            sizes |= {name: getattr(solution, name).shape for name in ("control_times", "control_values")}
+        if len(sizes) == 5:
+            break
+    defaults = {name: (0,) for name in ("primal", "bound_multipliers", "constraint_multipliers", "control_times")}
+    return defaults | {"control_values": (2, 0)} | sizes | {"initial_state": (6,)}
 
 
 # --- the driver -------------------------------------------------------------------------------------------
@@ -680,7 +690,7 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
         }
     return {
         "format": FORMAT_NAME,
-        "format_version": FORMAT_VERSION if job.climb_rates is None else FORMAT_VERSION_3D,
+        "format_version": FORMAT_VERSION_ANSWERS,
         "description": (
             "H-V envelope: verified landing analysis from level trim after an engine failure on a height x speed grid"
             if job.climb_rates is None
@@ -706,8 +716,7 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
         # where the answers hold (trim at nominal rotor speed, within tolerances): core/envelope/domain.py
         "validity_domain": domain.to_metadata(),
         "status_codes": dict(STATUS_CODES, pending=PENDING),
-        "plan_storage": "float32 per node: NLP primal, bound and constraint multipliers (planner.WarmStart); "
-        "control breakpoints and values",
+        "plan_storage": PLAN_STORAGE,
         "refinement": {
             "near_zero_value": NEAR_ZERO_VALUE,
             "height_tolerance_m": HEIGHT_TOLERANCE,
@@ -956,7 +965,7 @@ def compute_envelope(
     for state in states:
         current_edges = set(_boundary_edges(state))
         state.boundary = {edge: point for edge, point in state.boundary.items() if edge in current_edges}
-    envelope = snapshot(complete=True)
+    envelope = snapshot(complete=True).answers()  # as the file holds it; the solver state rides along
     if path is not None:
         save_envelope(envelope, path)
     return envelope

@@ -16,9 +16,15 @@ File format (``.npz``, one file per envelope, self-describing):
 * ``checksum``: SHA-256 over the metadata and every array (name, dtype, shape, bytes). A truncated or
   corrupt file fails the zip CRC or this checksum and is refused with :class:`EnvelopeError`.
 
-Per-cell plans are stored as float32: the NLP primal and both multiplier vectors (a
-:class:`~helireach_ros.core.planner.WarmStart`) and the control function (breakpoints and values), which
-is enough to warm-start the planner and to publish a fallback trajectory.
+Per-node plans (format version 3) are stored as the node's state at the failure (``plan_initial_state``, float64)
+and the plan's control function (breakpoints and values, float32: what a fallback flies, never a safety claim),
+enough to warm-start the planner, which flies the function from that state to rebuild the NLP's
+primal point (:class:`~helireach_ros.core.planner.ControlFunctionWarmStart`). IPOPT's solution itself (the
+*solver state*: primal and both multiplier vectors, float32, :data:`SOLVER_STATE_ARRAYS`) is 90 % of the bytes
+and changes whenever the NLP does, so a complete file leaves it out: :func:`save_envelope` writes it to the user
+cache (:func:`solver_state_path`, keyed by the answers' checksum) and :func:`read_envelope_file` attaches it when
+it is there (a faster warm start; docs/decisions/warm-start-storage.md). A partial file keeps it, for
+``--resume``. Files of versions 1 and 2 hold the solver state in the file and keep loading.
 
 **3-D envelopes** (format version 2) add a climb-rate axis: ``climb_rates`` (m/s, positive up, ascending)
 and every per-node array has a leading climb axis (C × H × S); the boundary points carry the index of
@@ -57,6 +63,7 @@ import dataclasses
 import hashlib
 import io
 import json
+import logging
 import math
 import os
 from collections.abc import Sequence
@@ -72,7 +79,7 @@ from helireach_ros.core.units import FT, KT
 
 if TYPE_CHECKING:
     from helireach_ros.core.airframe import Airframe
-    from helireach_ros.core.planner import WarmStart
+    from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart
     from helireach_ros.core.settings import PlannerSettings
 
 __all__ = [
@@ -80,10 +87,14 @@ __all__ = [
     "FORMAT_NAME",
     "FORMAT_VERSION",
     "FORMAT_VERSION_3D",
+    "FORMAT_VERSION_ANSWERS",
     "PENDING",
+    "PLAN_STORAGE",
     "QUERY_STATUSES",
     "ROBUST_ARRAYS",
     "ROBUST_CODES",
+    "SOLVER_STATE_ARRAYS",
+    "SOLVER_STATE_CACHE_ENV",
     "STATUS_CODES",
     "VERDICTS",
     "Envelope",
@@ -95,6 +106,7 @@ __all__ = [
     "read_envelope_file",
     "save_envelope",
     "settings_differences",
+    "solver_state_path",
     "stack_slices",
 ]
 
@@ -103,7 +115,17 @@ FORMAT_VERSION = 1
 """Format version of 2-D files (height × speed), unchanged since the first release."""
 FORMAT_VERSION_3D = 2
 """Format version of 3-D files (climb rate × height × speed): ``climb_rates`` and ``boundary_slice`` arrays."""
-_READABLE_VERSIONS = {FORMAT_VERSION: False, FORMAT_VERSION_3D: True}  # version -> holds a climb axis
+FORMAT_VERSION_ANSWERS = 3
+"""Format version of files written today, 2-D or 3-D (a ``climb_rates`` axis makes it 3-D): the answers and the
+plans as initial states and control functions; the solver state only in a partial file."""
+_READABLE_VERSIONS: dict[int, bool | None] = {  # version -> holds a climb axis (None: either)
+    FORMAT_VERSION: False, FORMAT_VERSION_3D: True, FORMAT_VERSION_ANSWERS: None,
+}  # fmt: skip
+SOLVER_STATE_ARRAYS = ("plan_primal", "plan_bound_multipliers", "plan_constraint_multipliers")
+"""IPOPT's solution per node (float32): in files of versions 1 and 2, in partial files, and in the user cache."""
+SOLVER_STATE_CACHE_ENV = "HELIREACH_ENVELOPE_CACHE"
+"""Environment variable naming the folder of cached solver states (default: the user cache's
+``helireach_ros/envelopes``)."""
 DEFAULT_ENVELOPE = "envelopes/uh60a_class_total_power_loss.npz"
 """The shipped envelope, relative to ``data/`` (generated data; ``config/`` holds hand-written input)."""
 
@@ -141,9 +163,6 @@ _REQUIRED_ARRAYS = {
     "warm_started": "b",
     "cold_checked": "b",
     "warm_cold_disagree": "b",
-    "plan_primal": "f",
-    "plan_bound_multipliers": "f",
-    "plan_constraint_multipliers": "f",
     "plan_control_times": "f",
     "plan_control_values": "f",
     "boundary": "f",
@@ -151,9 +170,18 @@ _REQUIRED_ARRAYS = {
     "boundary_edge": "i",
 }
 _CELL_ARRAYS = tuple(name for name in _REQUIRED_ARRAYS if name not in {"heights", "speeds"} and "boundary" not in name)
+_INITIAL_STATE = "plan_initial_state"
+"""Per node, the state at the failure the plan starts from (6, SI; NaN without a plan): required in version 3."""
 _CLIMB_ARRAYS = ("climb_rates", "boundary_slice")
 """The arrays a 3-D file holds beyond the 2-D ones."""
 _FPM = FT / 60.0
+log = logging.getLogger(__name__)
+PLAN_STORAGE = (
+    "per node: the state at the failure (plan_initial_state, float64) and the control function (breakpoints and "
+    "values, float32); the solver state (NLP primal, bound and constraint multipliers, float32) only in a partial "
+    "file, else in the user cache"
+)
+"""The metadata's ``plan_storage`` text of format version 3."""
 
 
 class EnvelopeError(ValueError):
@@ -199,7 +227,8 @@ class StoredPlan:
         status: the node's status.
         value: its optimal value.
         time_to_land: s.
-        warm_start: the NLP solution, for the planner of the envelope's airframe and settings.
+        warm_start: for the planner of the envelope's airframe and settings: the NLP solution where the solver
+            state is known (:attr:`Envelope.solver_state`), else the control function flown from the node's state.
         control_times, control_values, control_interpolation: the control function
             (see :class:`~helireach_ros.core.transcription.base.DecodedPlan`).
     """
@@ -209,7 +238,7 @@ class StoredPlan:
     status: str
     value: float
     time_to_land: float
-    warm_start: WarmStart
+    warm_start: WarmStart | ControlFunctionWarmStart
     control_times: np.ndarray
     control_values: np.ndarray
     control_interpolation: str
@@ -273,7 +302,14 @@ class Envelope:
         airframe_name: the airframe's name.
     """
 
-    def __init__(self, arrays: dict[str, np.ndarray], metadata: dict[str, Any]) -> None:
+    def __init__(
+        self,
+        arrays: dict[str, np.ndarray],
+        metadata: dict[str, Any],
+        solver_state: dict[str, np.ndarray] | None = None,
+    ) -> None:
+        """``solver_state``: the nodes' IPOPT solutions (:data:`SOLVER_STATE_ARRAYS`) kept beside the arrays (not
+        part of the content or its checksum), e.g. from the user cache; ignored when ``arrays`` hold them."""
         missing = sorted(set(_REQUIRED_ARRAYS) - set(arrays))
         if "climb_rates" in arrays:
             missing += [name for name in _CLIMB_ARRAYS if name not in arrays]
@@ -284,6 +320,12 @@ class Envelope:
         self._metadata = json.loads(self._metadata_json)
         self._validate()
         self._checksum = _content_checksum(self._arrays, self._metadata_json)
+        if all(name in self._arrays for name in SOLVER_STATE_ARRAYS):
+            solver_state = {name: self._arrays[name] for name in SOLVER_STATE_ARRAYS}
+        elif solver_state is not None:
+            solver_state = {name: _readonly(np.asarray(solver_state[name])) for name in SOLVER_STATE_ARRAYS}
+            self._check_cell_shapes(solver_state)
+        self._solver_state = solver_state
         self._status = _readonly(
             np.vectorize(lambda code: _STATUS_NAMES.get(int(code), "pending"), otypes=[object])(
                 self._arrays["status_code"]
@@ -299,20 +341,22 @@ class Envelope:
         # every query reads C × H × S arrays: a 2-D envelope is one slice
         self._stacked = {
             name: self._arrays[name] if self.is_3d else self._arrays[name][None]
-            for name in ("status_code", "value", "plan_primal", "plan_control_times")
+            for name in ("status_code", "value", "plan_control_times")
         }
         codes = self._stacked["status_code"]
-        primal = self._stacked["plan_primal"]
+        # the plan's start: the state (version 3) or, in older files, the solver state
+        start = self._arrays[_INITIAL_STATE] if _INITIAL_STATE in self._arrays else self._arrays["plan_primal"]
+        start = start if self.is_3d else start[None]
         # nodes whose stored plan can warm-start a solve and be flown as a fallback, found once (nearest_plan is
         # on the failure path); a node decided without the NLP (e.g. by a reaction delay) has no plan
         self._usable_plans = (
             (codes >= 0)
             & (codes != STATUS_CODES["failed"])
             & (codes != STATUS_CODES["no_trim"])
-            & np.all(np.isfinite(primal), axis=3)
+            & np.all(np.isfinite(start), axis=3)
             & np.all(np.isfinite(self._stacked["plan_control_times"]), axis=3)
         )
-        if primal.shape[3] == 0:
+        if start.shape[3] == 0 or self._stacked["plan_control_times"].shape[3] == 0:
             self._usable_plans[:] = False
         self._margin_geometry = self._margins(codes == 0)
         if self.has_robust_verdict:
@@ -345,10 +389,19 @@ class Envelope:
             minimum = 1 if name == "climb_rates" else 2
             if axis.ndim != 1 or axis.size < minimum or not np.all(np.isfinite(axis)) or np.any(np.diff(axis) <= 0):
                 raise EnvelopeError(f"grid axis {name!r} must hold >= {minimum} finite, strictly ascending values")
-        grid = tuple(axis.size for _, axis in axes)
-        for name in _CELL_ARRAYS:
-            if arrays[name].shape[: len(grid)] != grid:
-                raise EnvelopeError(f"array {name!r} has shape {arrays[name].shape}, expected {grid} leading")
+        self._check_cell_shapes({name: arrays[name] for name in _CELL_ARRAYS})
+        version = self._metadata.get("format_version")
+        present = [name for name in SOLVER_STATE_ARRAYS if name in arrays]
+        if present and len(present) != len(SOLVER_STATE_ARRAYS):
+            raise EnvelopeError(f"envelope holds part of the solver state: {', '.join(present)}")
+        if version == FORMAT_VERSION_ANSWERS and _INITIAL_STATE not in arrays:
+            raise EnvelopeError(f"a format version {version} envelope needs the array {_INITIAL_STATE!r}")
+        if version != FORMAT_VERSION_ANSWERS and not present:
+            needed = ", ".join(SOLVER_STATE_ARRAYS)
+            raise EnvelopeError(f"a format version {version} envelope needs the arrays {needed}")
+        optional = [name for name in (*SOLVER_STATE_ARRAYS, _INITIAL_STATE) if name in arrays]
+        self._check_cell_shapes({name: arrays[name] for name in optional})
+        grid = arrays["status_code"].shape
         codes = arrays["status_code"]
         if not np.all(np.isin(codes, [PENDING, *STATUS_CODES.values()])):
             raise EnvelopeError("status_code holds unknown codes")
@@ -380,6 +433,14 @@ class Envelope:
         if self._metadata.get("format") != FORMAT_NAME:
             raise EnvelopeError(f"metadata format is {self._metadata.get('format')!r}, expected {FORMAT_NAME!r}")
 
+    def _check_cell_shapes(self, arrays: dict[str, np.ndarray]) -> None:
+        """Per-node arrays lead with the grid's shape (C × H × S or H × S)."""
+        axes = ("climb_rates", "heights", "speeds") if self.is_3d else ("heights", "speeds")
+        grid = tuple(self._arrays[axis].size for axis in axes)
+        for name, array in arrays.items():
+            if array.shape[: len(grid)] != grid:
+                raise EnvelopeError(f"array {name!r} has shape {array.shape}, expected {grid} leading")
+
     # --- the contract's attributes -------------------------------------------------------------
     heights = _array_property("heights", "Grid heights above ground, m, ascending.")
     speeds = _array_property("speeds", "Grid forward speeds, m/s, ascending.")
@@ -391,6 +452,39 @@ class Envelope:
     def is_3d(self) -> bool:
         """The envelope has a climb-rate axis (format version 2)."""
         return "climb_rates" in self._arrays
+
+    @property
+    def format_version(self) -> int:
+        """The file format version the content follows (:data:`FORMAT_VERSION_ANSWERS` for files written today)."""
+        version = self._metadata.get("format_version", FORMAT_VERSION)
+        return version if type(version) is int else 0  # 0: not a version (the file reader refuses such a file)
+
+    @property
+    def solver_state(self) -> dict[str, np.ndarray] | None:
+        """The nodes' IPOPT solutions (:data:`SOLVER_STATE_ARRAYS`, read-only) where known: in the file (versions
+        1 and 2, partial files) or from the user cache; None otherwise (stored plans then warm-start from their
+        control functions)."""
+        return None if self._solver_state is None else dict(self._solver_state)
+
+    def answers(self) -> Envelope:
+        """This envelope as today's file holds it (format version 3): no solver state in the content, the control
+        functions in float32, the initial states in float64; the solver state, if known, rides along
+        (:attr:`solver_state`).
+
+        Raises:
+            EnvelopeError: an envelope of an older version (no initial states to rebuild its plans from).
+        """
+        if _INITIAL_STATE not in self._arrays:
+            raise EnvelopeError(
+                f"a format version {self.format_version} envelope has no plan initial states; recompute it with "
+                "'helireach envelope compute' to write today's format"
+            )
+        arrays = {name: array for name, array in self._arrays.items() if name not in SOLVER_STATE_ARRAYS}
+        for name in ("plan_control_times", "plan_control_values"):
+            arrays[name] = arrays[name].astype(np.float32)
+        arrays[_INITIAL_STATE] = arrays[_INITIAL_STATE].astype(np.float64)
+        metadata = dict(self._metadata, format_version=FORMAT_VERSION_ANSWERS, plan_storage=PLAN_STORAGE)
+        return Envelope(arrays, metadata, self._solver_state)
 
     @property
     def has_robust_verdict(self) -> bool:
@@ -495,12 +589,16 @@ class Envelope:
         for name in ("boundary", "boundary_unsafe_side", "boundary_edge"):
             arrays[name] = self._arrays[name][in_slice]
         metadata = copy.deepcopy(self._metadata)
-        metadata["format_version"] = FORMAT_VERSION
+        metadata["format_version"] = FORMAT_VERSION_ANSWERS if self.format_version == FORMAT_VERSION_ANSWERS else (
+            FORMAT_VERSION)  # fmt: skip
         metadata["climb_slice"] = {
             "index": index, "climb_rate_m_s": climb_rate, "climb_rate_fpm": climb_rate / _FPM, "of": count,
         }  # fmt: skip
         metadata["validity_domain"] = dataclasses.replace(self._domain, climb_rates=(climb_rate,)).to_metadata()
-        return Envelope(arrays, metadata)
+        solver_state = None
+        if self._solver_state is not None and not all(name in arrays for name in SOLVER_STATE_ARRAYS):
+            solver_state = {name: array[index] for name, array in self._solver_state.items()}
+        return Envelope(arrays, metadata, solver_state)
 
     # --- queries -------------------------------------------------------------------------------
     def _enclosing_slices(self, climb_rate: float) -> list[int] | None:
@@ -597,23 +695,32 @@ class Envelope:
 
     def stored_plan(self, row: int, column: int, climb_index: int = 0) -> StoredPlan:
         """The plan stored at grid node (row, column) [of climb slice ``climb_index``], as float64."""
-        from helireach_ros.core.planner import WarmStart
+        from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart
 
         node = (climb_index, row, column) if self.is_3d else (row, column)
         arrays = self._arrays
+        control_times = arrays["plan_control_times"][node].astype(float)
+        control_values = arrays["plan_control_values"][node].astype(float)
+        solver_state = self._solver_state
+        warm_start: WarmStart | ControlFunctionWarmStart
+        if solver_state is not None and np.all(np.isfinite(solver_state["plan_primal"][node])):
+            warm_start = WarmStart(*(solver_state[name][node].astype(float) for name in SOLVER_STATE_ARRAYS))
+        else:
+            warm_start = ControlFunctionWarmStart(
+                arrays[_INITIAL_STATE][node].astype(float),
+                control_times,
+                control_values,
+                float(self._metadata.get("settings", {}).get("reaction_delay_s", 0.0)),
+            )
         return StoredPlan(
             height=float(self.heights[row]),
             speed=float(self.speeds[column]),
             status=str(self.status[node]),
             value=float(self.value[node]),
             time_to_land=float(self.time_to_land[node]),
-            warm_start=WarmStart(
-                arrays["plan_primal"][node].astype(float),
-                arrays["plan_bound_multipliers"][node].astype(float),
-                arrays["plan_constraint_multipliers"][node].astype(float),
-            ),
-            control_times=arrays["plan_control_times"][node].astype(float),
-            control_values=arrays["plan_control_values"][node].astype(float),
+            warm_start=warm_start,
+            control_times=control_times,
+            control_values=control_values,
             control_interpolation=str(self._metadata.get("control_interpolation", "zero_order_hold")),
             climb_rate=float(self.climb_rates[climb_index]) if self.is_3d else 0.0,
         )
@@ -782,19 +889,72 @@ class _MarginGeometry:
         return -self._distance(self.safe_rectangles, height_ft, speed_kt)
 
 
+def solver_state_path(checksum: str) -> Path:
+    """Where the solver state of the envelope with this content checksum is cached (see the module docstring)."""
+    folder = os.environ.get(SOLVER_STATE_CACHE_ENV)
+    if not folder:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        folder = os.path.join(base, "helireach_ros", "envelopes")
+    return Path(folder) / f"solver_state_{checksum[:32]}.npz"
+
+
 def save_envelope(envelope: Envelope, path: str | os.PathLike[str]) -> Path:
     """Writes an envelope atomically (temporary file + rename) with its checksum.
+
+    A complete envelope of today's format is written without its solver state, which goes to the user cache
+    (:func:`solver_state_path`; a cache that cannot be written only costs warm-start speed). A partial one keeps
+    it in the file, for ``--resume``; an older format is written as it is.
 
     Returns:
         The path written.
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
+    if envelope.complete and envelope.format_version == FORMAT_VERSION_ANSWERS:
+        envelope = envelope.answers()
+        if envelope.solver_state is not None:
+            try:
+                _write_npz(solver_state_path(envelope.checksum), _solver_state_payload(envelope))
+            except OSError as error:
+                log.warning("could not cache the envelope's solver state: %s", error)
     arrays = envelope.arrays
-    metadata_json = envelope._metadata_json
     payload = {name: np.ascontiguousarray(array) for name, array in arrays.items()}
-    payload["metadata_json"] = np.frombuffer(metadata_json, dtype=np.uint8)
+    payload["metadata_json"] = np.frombuffer(envelope._metadata_json, dtype=np.uint8)
     payload["checksum"] = np.frombuffer(envelope.checksum.encode(), dtype=np.uint8)
+    return _write_npz(Path(path), payload)
+
+
+def _solver_state_payload(envelope: Envelope) -> dict[str, np.ndarray]:
+    """The solver-state cache file's arrays: the state, the answers' checksum, and a checksum over both."""
+    state = {name: np.ascontiguousarray(array) for name, array in (envelope.solver_state or {}).items()}
+    owner = envelope.checksum.encode()
+    return state | {
+        "answers_checksum": np.frombuffer(owner, dtype=np.uint8),
+        "checksum": np.frombuffer(_content_checksum(state, owner).encode(), dtype=np.uint8),
+    }
+
+
+def _cached_solver_state(checksum: str) -> dict[str, np.ndarray] | None:
+    """The cached solver state of the envelope with this checksum, None if absent, unreadable or not its own."""
+    path = solver_state_path(checksum)
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as archive:
+            contents = {name: archive[name] for name in archive.files}
+        owner = contents.pop("answers_checksum").tobytes()
+        stored = contents.pop("checksum").tobytes().decode("ascii")
+    except Exception as error:  # a cache file is a convenience: anything wrong with it means "not cached"
+        log.warning("ignoring the cached solver state %s: %s: %s", path, type(error).__name__, error)
+        return None
+    if owner != checksum.encode() or _content_checksum(contents, owner) != stored or set(contents) != set(
+        SOLVER_STATE_ARRAYS
+    ):
+        log.warning("ignoring the cached solver state %s: it is not this envelope's, or it is corrupt", path)
+        return None
+    return contents
+
+
+def _write_npz(target: Path, payload: dict[str, np.ndarray]) -> Path:
+    target.parent.mkdir(parents=True, exist_ok=True)
     temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:
         with open(temporary, "wb") as handle:
@@ -846,16 +1006,22 @@ def read_envelope_file(path: str | os.PathLike[str], allow_partial: bool = False
             f"envelope file {str(source)!r} has format version {version}, this software reads versions "
             f"{', '.join(str(v) for v in _READABLE_VERSIONS)}; recompute it"
         )
-    if _READABLE_VERSIONS[version] != ("climb_rates" in contents):
+    if _READABLE_VERSIONS[version] not in (None, "climb_rates" in contents):
         kind = "3-D" if _READABLE_VERSIONS[version] else "2-D"
         raise EnvelopeError(
             f"envelope file {str(source)!r} is a format version {version} ({kind}) file without "
             f"the matching climb-rate axis"
         )
+    solver_state = None
+    if not all(name in contents for name in SOLVER_STATE_ARRAYS):
+        solver_state = _cached_solver_state(stored_checksum)
     try:
-        envelope = Envelope(contents, metadata)
+        envelope = Envelope(contents, metadata, solver_state)
     except EnvelopeError as error:
-        raise EnvelopeError(f"envelope file {str(source)!r}: {error}") from None
+        if solver_state is None:
+            raise EnvelopeError(f"envelope file {str(source)!r}: {error}") from None
+        log.warning("ignoring the cached solver state of %s: %s", source, error)
+        envelope = Envelope(contents, metadata)
     if not allow_partial and not envelope.complete:
         done = int(np.sum(envelope.arrays["status_code"] != PENDING))
         raise EnvelopeError(

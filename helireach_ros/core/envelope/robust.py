@@ -205,7 +205,7 @@ def add_robust_verdicts(
     metadata["robust"] = _robust_metadata(job, codes, seconds, plans, wall, executor.description, command)
     metadata["robust"]["not_robust_failing_model_has_no_landing"] = int(np.sum(attainable == 0))
     metadata["robust"]["not_robust_failing_model_has_a_landing"] = int(np.sum(attainable == 1))
-    return Envelope(new_arrays, metadata)
+    return Envelope(new_arrays, metadata, envelope.solver_state)
 
 
 def _robust_metadata(job: RobustEnvelopeJob, codes: np.ndarray, seconds: np.ndarray, plans: int, wall: float,
