@@ -173,7 +173,7 @@ def _acados_worker(exchange: Path) -> None:
 
 
 def _compare(arguments: argparse.Namespace) -> None:
-    from baseline_config import loadavg_text
+    from _common import command_line, loadavg_text, summary
 
     from helireach_ros.core.airframe import load_airframe
     from helireach_ros.core.model import initial_state_after_failure
@@ -183,7 +183,7 @@ def _compare(arguments: argparse.Namespace) -> None:
     from helireach_ros.core.units import FT, KT
     from helireach_ros.core.verification import replay_plan
 
-    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
+    print(f"command: {command_line()}; load average {loadavg_text()}")
     airframe, settings = load_airframe(arguments.airframe), load_settings()
     planner = get_planner(airframe, settings)
     transcription = planner.transcription
@@ -285,8 +285,11 @@ def _compare(arguments: argparse.Namespace) -> None:
         ("IPOPT (planner)", ipopt_ms, [plan.solver.iterations for plan in ipopt]),
         ("acados SQP+HPIPM", acados_ms, acados_results["iterations"]),
     ):
-        p50, p95 = np.percentile(times, [50, 95])
-        print(f"  {name:18s} p50 {p50:7.2f} ms  p95 {p95:7.2f} ms  iterations mean {np.mean(iterations):5.1f}")
+        stats = summary(times)
+        print(
+            f"  {name:18s} p50 {stats['median']:7.2f} ms  p95 {stats['p95']:7.2f} ms  "
+            f"iterations mean {np.mean(iterations):5.1f}"
+        )
     print(f"  ratio of medians acados / IPOPT: {np.median(acados_ms) / np.median(ipopt_ms):.3f}")
     converged = sum(row[3] for row in rows)
     same = sum(row[0].status == row[1] for row in rows)

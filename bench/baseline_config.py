@@ -1,15 +1,12 @@
-"""What the benches' ``--baseline`` runs: the legacy planner configuration, and the load line they print.
+"""What the benches' ``--baseline`` runs: the legacy planner configuration.
 
-Imported by the bench scripts (which run with ``bench/`` on ``sys.path``).
+Imported by the bench scripts (which run with ``bench/`` on ``sys.path``); the helpers every bench shares (load
+average, commit, results records) are in ``_common.py``.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import datetime
-import os
-import subprocess
-import sys
 
 from helireach_ros.core.compiled_nlp import CodegenSettings
 from helireach_ros.core.settings import PlannerSettings
@@ -18,8 +15,6 @@ __all__ = [
     "LEGACY_CONFIGURATION",
     "baseline_codegen",
     "baseline_settings",
-    "loadavg_text",
-    "results_footer",
     "six_state_settings",
     "with_mumps",
 ]
@@ -48,19 +43,4 @@ def baseline_codegen() -> CodegenSettings:
 def with_mumps(codegen: CodegenSettings) -> CodegenSettings:
     """``codegen`` with MUMPS as IPOPT's linear solver (the current configuration before the block LDL^T)."""
     return dataclasses.replace(codegen, linear_solver="mumps")
-
-
-def loadavg_text() -> str:
-    """``os.getloadavg()`` as printed by the benches (1, 5 and 15 minutes)."""
-    return " ".join(f"{load:.2f}" for load in os.getloadavg())
-
-
-def results_footer(load_before: str, *details: str) -> str:
-    """The line a generated results page ends with: the command that reproduces it (this script and its
-    arguments), the commit, the date, the load average before and after, and ``details``."""
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    command = " ".join([".venv/bin/python", sys.argv[0], *sys.argv[1:]])
-    parts = [f"Command: `{command}`", f"commit {commit or 'unknown'}", datetime.date.today().isoformat(),
-             f"load {load_before} → {loadavg_text()}", *details]  # fmt: skip
-    return "; ".join(parts) + "."
 

@@ -1,14 +1,15 @@
 """H-V envelope throughput: wall time and nodes/s for a full grid with 1 and 2 workers, and where the time goes.
 
 Run: .venv/bin/python bench/envelope_throughput.py [--workers 1,2] [--heights-ft 0:800:41] [--speeds-kt 0:120:25]
-     [--baseline] [--repeat N]
+     [--baseline] [--repeat N] [--json]
 
 Each run is the complete pipeline of ``helireach envelope compute`` (sweep, cold re-checks, boundary
 refinement) with the default airframe and planner settings; 1 worker runs in this process, more use a
 local process pool (worker start-up included). Prints per run: wall time, nodes/s, the share of nodes
 re-solved cold, solve counts, per-phase wall time; then, from a few sweep columns timed in this process,
 how a node's time splits between IPOPT and the rest of ``plan`` (decode + CVODES replay). The machine's
-load average is printed too: other processes on a shared machine slow every number here.
+load average is printed too: other processes on a shared machine slow every number here. ``--json`` also writes
+the numbers to docs/results/data/envelope_throughput.json.
 
 ``--baseline`` runs, for each worker count, the legacy configuration (legacy sweep: cold restart
 after every not-safe node, every node replayed; the warm-solver options of then; plain CasADi functions; MUMPS; the
@@ -22,21 +23,18 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import platform
-import sys
 import time
 
 import numpy as np
-from baseline_config import baseline_codegen, baseline_settings, loadavg_text
+from _common import ENVELOPE_GRID, Record, StateGrid, add_json_argument, loadavg_text, machine_text
+from baseline_config import baseline_codegen, baseline_settings
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.compute import EnvelopeJob, _solve_point, _warm_start_of, compute_envelope
 from helireach_ros.core.envelope.data import STATUS_CODES
-from helireach_ros.core.envelope.grid import parse_range
 from helireach_ros.core.envelope.workers import make_executor
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.settings import load_settings
-from helireach_ros.core.units import FT, KT
 
 
 def _baseline_job(job: EnvelopeJob) -> EnvelopeJob:
@@ -45,7 +43,9 @@ def _baseline_job(job: EnvelopeJob) -> EnvelopeJob:
     )
 
 
-def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float, np.ndarray]:
+def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float, np.ndarray, dict]:
+    """Computes the envelope with ``workers`` and prints where the time went; returns the wall time, the workers'
+    CPU time, the nodes' statuses and the printed numbers."""
     load_before = os.getloadavg()[0]
     started = time.perf_counter()
     executor = make_executor(workers)
@@ -90,12 +90,25 @@ def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float,
         f"  result               {counts}, envelope {envelope.envelope_id}; {not_replayed} nodes not replayed "
         f"(NLP unsafe/failed), {without_nlp} decided without the NLP (on the ground)"
     )
-    print(f"  load average         {load_before:.2f} before, {os.getloadavg()[0]:.2f} after")
-    return wall, sum(compute["phase_solve_and_replay_cpu_s"].values()), envelope.status.copy()
+    load_after = os.getloadavg()[0]
+    print(f"  load average         {load_before:.2f} before, {load_after:.2f} after")
+    numbers = {
+        "workers": workers, "executor": executor.description, "configuration": label.strip() or "current",
+        "nodes": nodes, "wall_s": wall, "nodes_per_s": nodes / wall, "solves_per_s": solves / wall,
+        "phases_s": compute["phases_s"],
+        "worker_ipopt_s": compute["phase_ipopt_s"], "worker_solve_and_replay_s": compute["phase_solve_and_replay_s"],
+        "worker_cpu_s": sum(cpu.values()), "sweep_cold_solves": sweep_cold,
+        "cold_recheck_share": counters["cold_rechecks"] / nodes, "solves": solves, "counters": counters,
+        "boundary_points": len(envelope.boundary), "statuses": counts, "envelope_id": envelope.envelope_id,
+        "not_replayed": not_replayed, "decided_without_nlp": without_nlp,
+        "load_1min_before": load_before, "load_1min_after": load_after,
+    }  # fmt: skip
+    return wall, sum(cpu.values()), envelope.status.copy(), numbers
 
 
-def _time_split(job: EnvelopeJob, columns: list[int]) -> None:
-    """IPOPT versus the rest of plan() (decode + replay), per node, over a few sweep columns in this process."""
+def _time_split(job: EnvelopeJob, columns: list[int]) -> dict:
+    """IPOPT versus the rest of plan() (decode + replay), per node, over a few sweep columns in this process:
+    prints and returns it."""
     get_planner(job.airframe, job.settings)  # built before timing
     ipopt_ms, total_ms, iterations = [], [], []
     for column in columns:
@@ -120,40 +133,52 @@ def _time_split(job: EnvelopeJob, columns: list[int]) -> None:
         f"  decode+replay  median {np.median(rest):6.1f} ms, mean {rest.mean():6.1f} ms "
         f"({rest.sum() / total.sum():.0%})"
     )
+    return {
+        "columns": columns, "solves": len(total),
+        "plan_ms": {"median": np.median(total), "mean": total.mean()},
+        "ipopt_ms": {"median": np.median(ipopt), "mean": ipopt.mean(), "share": ipopt.sum() / total.sum()},
+        "iterations_mean": np.mean(iterations), "ipopt_ms_per_iteration": ipopt.sum() / np.sum(iterations),
+        "decode_replay_ms": {"median": np.median(rest), "mean": rest.mean(), "share": rest.sum() / total.sum()},
+    }  # fmt: skip
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default: %(default)s)")
-    parser.add_argument("--heights-ft", default="0:800:41")
-    parser.add_argument("--speeds-kt", default="0:120:25")
+    parser.add_argument("--heights-ft", default=ENVELOPE_GRID.heights_ft)
+    parser.add_argument("--speeds-kt", default=ENVELOPE_GRID.speeds_kt)
     parser.add_argument("--airframe", default="uh60a_class")
     parser.add_argument("--baseline", action="store_true", help="also run the legacy configuration")
     parser.add_argument("--repeat", type=int, default=1, help="with --baseline: alternating runs of each")
+    add_json_argument(parser)
     arguments = parser.parse_args()
+    record = Record.start()
     airframe, settings = load_airframe(arguments.airframe), load_settings()
-    job = EnvelopeJob(
-        airframe, settings, 0.0, parse_range(arguments.heights_ft, FT), parse_range(arguments.speeds_kt, KT)
-    )
+    grid = StateGrid(arguments.heights_ft, arguments.speeds_kt)
+    job = EnvelopeJob(airframe, settings, 0.0, grid.heights_si(), grid.speeds_si())
     print(
         f"envelope throughput: {airframe.name}, {len(job.heights)} x {len(job.speeds)} grid "
         f"({arguments.heights_ft} ft, {arguments.speeds_kt} kt), method {settings.method}, {settings.intervals} "
-        f"intervals; {os.cpu_count()} CPUs, {platform.processor() or platform.machine()}, Python "
-        f"{platform.python_version()}"
+        f"intervals; {machine_text()}"
     )
-    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
+    print(f"command: {record.command}; load average {record.load_before}")
+    numbers: dict = {
+        "airframe": airframe.name, "grid": grid.describe(), "method": settings.method,
+        "intervals": settings.intervals, "runs": [], "baseline_ratios": [],
+    }  # fmt: skip
     for workers in (int(item) for item in arguments.workers.split(",")):
         if not arguments.baseline:
-            _run(job, workers)
+            numbers["runs"].append(_run(job, workers)[3])
             continue
         walls: dict[str, list[float]] = {"baseline": [], "current": []}
         cpus: dict[str, list[float]] = {"baseline": [], "current": []}
         statuses = {}
         for _ in range(arguments.repeat):
             for name, variant in (("baseline", _baseline_job(job)), ("current", job)):
-                wall, cpu, statuses[name] = _run(variant, workers, f" {name}")
+                wall, cpu, statuses[name], run = _run(variant, workers, f" {name}")
                 walls[name].append(wall)
                 cpus[name].append(cpu)
+                numbers["runs"].append(run)
         same = int(np.sum(statuses["baseline"] == statuses["current"]))
         ratios = [current / base for current, base in zip(walls["current"], walls["baseline"], strict=True)]
         overall = np.sum(walls["current"]) / np.sum(walls["baseline"])
@@ -164,7 +189,13 @@ def main() -> None:
             f"identical classification {same} of "
             f"{statuses['current'].size} nodes; load average {loadavg_text()}"
         )
-    _time_split(job, [0, len(job.speeds) // 2, len(job.speeds) - 1])
+        numbers["baseline_ratios"].append({
+            "workers": workers, "wall": overall, "wall_per_pair": ratios, "worker_cpu": cpu_ratio,
+            "identical_classification": same, "nodes": statuses["current"].size,
+        })  # fmt: skip
+    numbers["time_split"] = _time_split(job, [0, len(job.speeds) // 2, len(job.speeds) - 1])
+    if arguments.json:
+        record.write(numbers)
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Failure message → landing trajectory on the wire: p50/p95 over many failures at different states.
 
 Run: .venv/bin/python bench/failure_latency.py [--failures 40] [--mode both|composed|cross-process] [--seed 1]
-     [--executor single_threaded|events] [--baseline]
+     [--executor single_threaded|events] [--baseline] [--json]
 
 For each failure the bench streams a level-flight state (50 Hz odometry and rotor speed) at a seeded
 random (height, speed) over 50–800 ft × 0–115 kt (off the envelope grid, so the warm start is a
@@ -27,7 +27,8 @@ schedule, as a vehicle streams them (not after every ``spin_once``, which floode
 without any trajectory within 10 s is counted and reported, not fatal. ``--baseline`` also runs, in the same
 run, ``solver_workers:=0 live_rate:=0`` (the legacy configuration: solves on the node's thread, no
 standby) and prints the ratio of its failure → first trajectory p50/p95 to the defaults'. Prints the command
-line and what it measured on this machine, with the load average.
+line and what it measured on this machine, with the load average; ``--json`` also writes it to
+docs/results/data/failure_latency.json.
 """
 
 from __future__ import annotations
@@ -35,7 +36,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import platform
 import random
 import subprocess
 import sys
@@ -43,9 +43,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
 import rclpy
-from baseline_config import loadavg_text
+from _common import Record, add_json_argument, loadavg_text, machine_text, summary, summary_text
 from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -254,40 +253,47 @@ def run_cross_process(
         rclpy.try_shutdown(context=context)
 
 
-def _percentiles(label: str, samples: list[float]) -> str:
-    data = np.asarray([sample for sample in samples if not math.isnan(sample)])
-    if not len(data):
-        return f"  {label:<36} none"
-    return (
-        f"  {label:<36} p50 {np.percentile(data, 50):6.1f} ms  p95 {np.percentile(data, 95):6.1f} ms  "
-        f"max {data.max():6.1f} ms  (n = {len(data)})"
-    )
+_LATENCIES = {
+    "first": "failure -> first trajectory (any)",
+    "first_standby": "  of which the standby plan",
+    "first_refined": "  of which the refined plan",
+    "first_fallback": "  of which a flagged fallback",
+    "standby_in_planner": "  standby: event -> publish in planner",
+    "refined": "failure -> refined (converged) plan",
+}
+"""The latencies :func:`_report` summarises, by key, and the label each is printed with."""
 
 
-def _report(name: str, results: dict[str, list]) -> None:
-    first, kinds, refined = results["first"], results["kind"], results["refined"]
+def _report(name: str, results: dict[str, list]) -> dict:
+    """Prints one run's latencies and counts; returns them (:data:`_LATENCIES` summaries, counts, the refined
+    plans' IPOPT time, iterations and planner event -> publish time)."""
+    first, kinds = results["first"], results["kind"]
+    samples = {
+        "first": first,
+        **{f"first_{kind}": [t for t, k in zip(first, kinds, strict=True) if k == kind]
+           for kind in ("standby", "refined", "fallback")},
+        "standby_in_planner": [t for t, k in zip(results["first_in_planner"], kinds, strict=True) if k == "standby"],
+        "refined": results["refined"],
+    }  # fmt: skip
+    numbers: dict = {"failures": len(first), **{key: summary(samples[key]) for key in _LATENCIES}}
     print(f"\n{name}: {len(first)} failures, load average {loadavg_text()}")
-    print(_percentiles("failure -> first trajectory (any)", first))
-    print(_percentiles("  of which the standby plan", [t for t, k in zip(first, kinds, strict=True) if k == "standby"]))
-    print(_percentiles("  of which the refined plan", [t for t, k in zip(first, kinds, strict=True) if k == "refined"]))
-    print(
-        _percentiles("  of which a flagged fallback", [t for t, k in zip(first, kinds, strict=True) if k == "fallback"])
-    )
-    in_planner = [t for t, k in zip(results["first_in_planner"], kinds, strict=True) if k == "standby"]
-    print(_percentiles("  standby: event -> publish in planner", in_planner))
-    print(_percentiles("failure -> refined (converged) plan", refined))
+    for key, label in _LATENCIES.items():
+        print(f"  {label:<36} {summary_text(numbers[key])}")
     counts = {kind: kinds.count(kind) for kind in ("standby", "refined", "fallback")}
+    numbers.update(first_kinds=counts, stale=results["stale"][0], lost=results["lost"][0])
     print(f"  first trajectory was: {counts} (no standby: no safe live verdict at that state, or none yet)")
     print(f"  planned from the previous failure's state (state not yet received): {results['stale'][0]}")
     print(f"  no trajectory received within {_TIMEOUT_S:g} s: {results['lost'][0]}")
     if not results["details"]:
-        return
-    solve, planner, iterations = (np.asarray(column) for column in zip(*results["details"], strict=True))
+        return numbers
+    solve, planner, iterations = (summary(column) for column in zip(*results["details"], strict=True))
+    numbers.update(refined_ipopt=solve, refined_iterations=iterations, refined_in_planner=planner)
     print(
-        f"  refined plan: IPOPT p50 {np.percentile(solve, 50):6.1f} ms  p95 {np.percentile(solve, 95):6.1f} "
-        f"ms  (iterations p50 {np.percentile(iterations, 50):.0f}, p95 {np.percentile(iterations, 95):.0f}); "
-        f"planner event -> publish p50 {np.percentile(planner, 50):6.1f} ms  p95 {np.percentile(planner, 95):6.1f} ms"
+        f"  refined plan: IPOPT p50 {solve['median']:6.1f} ms  p95 {solve['p95']:6.1f} "
+        f"ms  (iterations p50 {iterations['median']:.0f}, p95 {iterations['p95']:.0f}); "
+        f"planner event -> publish p50 {planner['median']:6.1f} ms  p95 {planner['p95']:6.1f} ms"
     )
+    return numbers
 
 
 def main() -> None:
@@ -296,15 +302,20 @@ def main() -> None:
     parser.add_argument("--mode", choices=("both", "composed", "cross-process"), default="both")
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="the system's executor")
-    parser.add_argument("--baseline", action="store_true", help="also run solver_workers:=0 live_rate:=0 (before)")
+    parser.add_argument("--baseline", action="store_true", help="also run solver_workers:=0 live_rate:=0 (legacy)")
+    add_json_argument(parser)
     arguments = parser.parse_args()
+    record = Record.start()
     states = _states(arguments.failures, arguments.seed)
     print(
-        f"helireach failure latency: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-        f"Python {platform.python_version()}, {arguments.failures} failures, seed {arguments.seed}, "
-        f"load average {loadavg_text()}"
+        f"helireach failure latency: {machine_text()}, {arguments.failures} failures, seed {arguments.seed}, "
+        f"load average {record.load_before}"
     )
-    print(f"command: {' '.join([Path(sys.executable).name, *sys.argv])}")
+    print(f"command: {record.command}")
+    numbers: dict = {
+        "failures": arguments.failures, "seed": arguments.seed, "executor": arguments.executor,
+        "states": "50-800 ft x 0-115 kt, level flight, total power loss", "runs": [], "baseline_ratios": {},
+    }  # fmt: skip
     configurations = [("solver workers + live evaluation (defaults)", [])]
     if arguments.baseline:
         configurations.append(("baseline: solver_workers:=0 live_rate:=0", _BASELINE))
@@ -320,18 +331,20 @@ def main() -> None:
             first = []
             for configuration_name, extra in configurations:
                 results = runner(states, log_dir, arguments.executor, extra)
-                _report(f"{runner_name}, {configuration_name}", results)
-                first.append([t for t in results["first"] if not math.isnan(t)])
-            if len(first) == 2 and all(first):
+                run = _report(f"{runner_name}, {configuration_name}", results)
+                numbers["runs"].append({"system": runner_name, "configuration": configuration_name, **run})
+                first.append(run["first"])
+            if len(first) == 2 and all(stats["n"] for stats in first):
                 defaults, baseline = first
-                ratios = [np.percentile(baseline, q) / np.percentile(defaults, q) for q in (50, 95)]
+                ratios = {key: baseline[key] / defaults[key] for key in ("median", "p95")}
+                numbers["baseline_ratios"][runner_name] = ratios
                 print(
-                    f"  failure -> first trajectory, baseline / defaults (same run): p50 {ratios[0]:.2f}x, "
-                    f"p95 {ratios[1]:.2f}x; load average now {loadavg_text()}"
+                    f"  failure -> first trajectory, baseline / defaults (same run): p50 {ratios['median']:.2f}x, "
+                    f"p95 {ratios['p95']:.2f}x; load average now {loadavg_text()}"
                 )
-    print(
-        f"\nstates: {Path(__file__).name} --seed {arguments.seed}: 50-800 ft x 0-115 kt, level flight, total power loss"
-    )
+    print(f"\nstates: {Path(__file__).name} --seed {arguments.seed}: {numbers['states']}")
+    if arguments.json:
+        record.write(numbers)
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-from baseline_config import loadavg_text, results_footer
+from _common import COARSE_GRID, command_line, loadavg_text, results_footer
 from hv_table import shape_row
 
 ROTOR_MODELS = ("paper", "momentum")
@@ -30,14 +30,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="out/hv_rotor_models")
     parser.add_argument("--figures", default="docs/hv")
     parser.add_argument("--airframes", nargs="+", default=["uh60a_class", "oh58a_class", "s300c_class"])
-    parser.add_argument("--heights-ft", default="0:800:17")
-    parser.add_argument("--speeds-kt", default="0:120:13")
+    parser.add_argument("--heights-ft", default=COARSE_GRID.heights_ft)
+    parser.add_argument("--speeds-kt", default=COARSE_GRID.speeds_kt)
     parser.add_argument("--write", metavar="FILE.md", help="write the results page (table and figures)")
     arguments = parser.parse_args(argv)
     out, figures = Path(arguments.out), Path(arguments.figures)
     out.mkdir(parents=True, exist_ok=True)
     figures.mkdir(parents=True, exist_ok=True)
-    print(f"command: {' '.join(sys.argv)}\nload average (1/5/15 min): {loadavg_text()}", flush=True)
+    print(f"command: {command_line()}\nload average (1/5/15 min): {loadavg_text()}", flush=True)
     helireach = [sys.executable, "-m", "helireach_ros.cli.main"]
     rows, figure_paths = [], []
     load_before = loadavg_text()

@@ -16,11 +16,10 @@ Per file (computed with ``helireach envelope compute``; the command is in each f
 from __future__ import annotations
 
 import argparse
-import sys
 from collections import deque
 
 import numpy as np
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text
 
 from helireach_ros.core.envelope.data import read_envelope_file
 from helireach_ros.core.units import FT, KT
@@ -92,7 +91,7 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("files", nargs="+", help="envelope .npz files")
     arguments = parser.parse_args()
-    print(f"command: {' '.join(sys.argv)}")
+    print(f"command: {command_line()}")
     print(f"load average (1/5/15 min): {loadavg_text()}")
     rows = [shape_row(path) for path in arguments.files]
     top = next((key for key in rows[0] if key.startswith("not safe at")), "top speed")

@@ -17,7 +17,7 @@ import sys
 
 import casadi as ca
 import numpy as np
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text
 
 from helireach_ros.core import planner as planner_module
 from helireach_ros.core.airframe import load_airframe
@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--airframe", default="oh58a_class")
     arguments = parser.parse_args(argv)
-    print(f"command: .venv/bin/python bench/inflow_formulation.py {' '.join(sys.argv[1:])}")
+    print(f"command: {command_line()}")
     print(f"load average (1/5/15 min): {loadavg_text()}")
     airframe = load_airframe(arguments.airframe).with_rotor_model_choice("momentum")
     codegen = CodegenSettings(mode="off")

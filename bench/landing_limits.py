@@ -18,7 +18,7 @@ import dataclasses
 import math
 import sys
 
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.model import initial_state_after_failure
@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--states", nargs="+", default=["500:75", "800:0"], help="height_ft:speed_kt ...")
     arguments = parser.parse_args(argv)
     states = [tuple(float(part) for part in text.split(":")) for text in arguments.states]
-    print(f"command: .venv/bin/python bench/landing_limits.py {' '.join(sys.argv[1:])}")
+    print(f"command: {command_line()}")
     print(f"load average (1/5/15 min): {loadavg_text()}")
     momentum = load_airframe(arguments.airframe).with_rotor_model_choice("momentum")
     print("| variant | " + " | ".join(f"{h:.0f} ft / {v:.0f} kt" for h, v in states) + " |")

@@ -21,13 +21,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from baseline_config import loadavg_text
-from plan_latency import _serpentine_grid
+from _common import ENVELOPE_GRID, StateGrid, command_line, loadavg_text, summary
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.compiled_nlp import CodegenSettings
@@ -68,9 +66,9 @@ def _compare(airframe, method: str, points) -> None:
     for name in configurations:
         for kind in kinds:
             total, count = np.sum(times[name][kind]), np.sum(iterations[name][kind])
-            p50, p95 = np.percentile(times[name][kind], [50, 95])
+            stats = summary(times[name][kind])
             print(
-                f"  {name:6s} {kind}: total {total:8.1f} ms, p50 {p50:6.1f} / p95 {p95:6.1f} ms, "
+                f"  {name:6s} {kind}: total {total:8.1f} ms, p50 {stats['median']:6.1f} / p95 {stats['p95']:6.1f} ms, "
                 f"{np.mean(iterations[name][kind]):5.1f} iterations, {total / max(count, 1):.2f} ms per iteration, "
                 f"{sum(verified[name][kind])} verified safe"
             )
@@ -91,12 +89,11 @@ def _compare(airframe, method: str, points) -> None:
 def _compare_envelopes(airframe) -> None:
     """The 41 x 25 default envelope computed in this process with MUMPS, then with the block LDL^T."""
     from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
-    from helireach_ros.core.envelope.grid import parse_range
 
     results = {}
     for name in ("mumps", "block_ldl"):
         job = EnvelopeJob(
-            airframe, load_settings(), 0.0, parse_range("0:800:41", FT), parse_range("0:120:25", KT),
+            airframe, load_settings(), 0.0, ENVELOPE_GRID.heights_si(), ENVELOPE_GRID.speeds_si(),
             codegen=_codegen(name),
         )  # fmt: skip
         started = time.perf_counter()
@@ -182,7 +179,7 @@ def main() -> None:
     parser.add_argument("--check-inertia", type=Path, help="check the matrices dumped in this folder and stop")
     parser.add_argument("--envelope", action="store_true", help="also compute the 41 x 25 envelope with each solver")
     arguments = parser.parse_args()
-    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
+    print(f"command: {command_line()}; load average {loadavg_text()}")
     if arguments.check_inertia is not None:
         check_inertia(arguments.check_inertia)
         return
@@ -194,7 +191,7 @@ def main() -> None:
     os.environ.setdefault("BLOCK_LDL_TIMES", "1")
     started = time.perf_counter()
     airframe = load_airframe(arguments.airframe)
-    _compare(airframe, arguments.method, _serpentine_grid(arguments.states))
+    _compare(airframe, arguments.method, StateGrid.of_about(arguments.states).cells(serpentine=True))
     if arguments.envelope:
         _compare_envelopes(airframe)
     print(f"done in {time.perf_counter() - started:.0f} s; load average {loadavg_text()}")

@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 import threading
 import time
 
 import numpy as np
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text, machine_text, summary, summary_text
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, failure_now_state
@@ -57,11 +56,6 @@ def random_walk(airframe, count: int, seed: int, start: tuple[float, float] = (5
             continue  # no powered trim there (e.g. too steep a descent): not a state to measure
         states.append(state.as_array())
     return states
-
-
-def percentiles(samples: list[float]) -> str:
-    p50, p95 = np.percentile(samples, [50, 95])
-    return f"p50 {p50:6.1f} ms  p95 {p95:6.1f} ms  (n={len(samples)})"
 
 
 def agreement(airframe, settings, planner, states: list[np.ndarray]) -> None:
@@ -116,7 +110,7 @@ def gil_effect(planner, pool: SolverPool, states: list[np.ndarray]) -> None:
     base = float(np.sum(timings["in process"]))
     print("2. warm live solve + replay, same states, same warm starts:")
     for key, samples in timings.items():
-        print(f"   {key:18s} {percentiles(samples)}  total {np.sum(samples) / base:.2f}x in-process")
+        print(f"   {key:18s} {summary_text(summary(samples))}  total {np.sum(samples) / base:.2f}x in-process")
 
 
 def cpu_seconds(pid: int) -> float:
@@ -154,7 +148,7 @@ def live_rate(airframe, pool: SolverPool, seconds: float) -> None:
     print(
         f"3. live evaluation at 5 Hz for {wall:.0f} s through the pool: {evaluator.evaluations / wall:.2f} Hz achieved,"
     )
-    print(f"   {evaluator.errors} errors; submit -> result {percentiles(latencies)}")
+    print(f"   {evaluator.errors} errors; submit -> result {summary_text(summary(latencies))}")
     print(
         f"   solver workers' CPU: {cpu / wall:.2f} CPU-seconds per second ({100 * cpu / wall / os.cpu_count():.0f} % of"
     )
@@ -170,7 +164,7 @@ def main() -> int:
     arguments = parser.parse_args()
     airframe, settings = load_airframe("uh60a_class"), load_settings()
     planner = get_planner(airframe, settings)
-    print(f"bench/live_status.py {' '.join(sys.argv[1:])}  ({platform.node()}, {os.cpu_count()} cores)")
+    print(f"command: {command_line()}  ({machine_text()})")
     print(f"load average before: {loadavg_text()}")
     # Half the walk from cruise, half from the low, slow corner (the hover avoid band), so both verdicts occur.
     half = arguments.states // 2
@@ -184,7 +178,7 @@ def main() -> int:
         gil_effect(planner, pool, states[:30])
         live_rate(airframe, pool, arguments.seconds)
     print(f"load average after: {loadavg_text()}")
-    print(f"reproduce: .venv/bin/python bench/live_status.py {' '.join(sys.argv[1:])}")
+    print(f"reproduce: {command_line()}")
     return 0
 
 

@@ -2,7 +2,7 @@
 
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
-     [--policies none weight disturbance weight+disturbance ...] [--truth-check]
+     [--policies none weight disturbance weight+disturbance ...] [--truth-check] [--json]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -24,8 +24,9 @@ an airframe with tightened limits.
 Prints, per margin setting: the success rate with its 95 % Wilson interval overall and per initial state,
 the touchdown descent-rate and forward-speed distributions, the rotor-speed range, the success rate in the
 lower and upper half of each range (what the failures lean on), each failure's seed;
-then (unless ``--no-weight-check``) the issue's acceptance case, an unknown +5 % weight from 500 ft / 75 kt,
-for a few latencies and noise seeds. Parallel over ``--workers`` local processes.
+then (unless ``--no-weight-check``) the acceptance case, an unknown +5 % weight from 500 ft / 75 kt, for a few
+latencies and noise seeds. Parallel over ``--workers`` local processes. ``--json`` also writes the numbers to
+docs/results/data/monte_carlo.json.
 
 ``--truth-check``: for every run also solve the landing in the run's *true* model (a planner built for the drawn
 airframe, cold IPOPT from the same initial state). A run whose true model has no safe landing from there cannot be
@@ -45,13 +46,12 @@ import argparse
 import dataclasses
 import math
 import multiprocessing
-import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
 from functools import lru_cache
 
 import numpy as np
-from baseline_config import loadavg_text
+from _common import Record, add_json_argument, loadavg_text, summary
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
@@ -205,58 +205,89 @@ def run_tasks(tasks: list, workers: int) -> list[dict]:
         return list(pool.map(fly, tasks, chunksize=1))
 
 
-def _percentiles(values: list[float]) -> str:
-    q = np.percentile(values, [0, 5, 50, 95, 100])
-    return "min {:.1f}  5% {:.1f}  median {:.1f}  95% {:.1f}  max {:.1f}".format(*q)
+def _distribution(stats: dict) -> str:
+    return "min {min:.1f}  5% {p5:.1f}  median {median:.1f}  95% {p95:.1f}  max {max:.1f}".format(**stats)
+
+
+def success_rate(within: int, runs: int) -> dict:
+    """``within`` of ``runs``: the share in % and its 95 % Wilson interval in %."""
+    low, high = wilson_interval(within, runs)
+    return {"within": within, "runs": runs, "percent": 100 * within / max(runs, 1), "ci95": [100 * low, 100 * high]}
 
 
 def _rate(within: int, runs: int) -> str:
-    low, high = wilson_interval(within, runs)
-    return f"{within:4d}/{runs:<4d} {100 * within / max(runs, 1):5.1f} %  [{100 * low:5.1f}, {100 * high:5.1f}] %"
+    rate = success_rate(within, runs)
+    low, high = rate["ci95"]
+    return f"{within:4d}/{runs:<4d} {rate['percent']:5.1f} %  [{low:5.1f}, {high:5.1f}] %"
+
+
+TOUCHDOWN_QUANTITIES = {
+    "descent_ft_s": "touchdown descent rate ft/s",
+    "speed_kt": "touchdown |forward speed| kt",
+    "rotor_min_pct": "rotor minimum in flight %",
+    "rotor_max_pct": "rotor maximum in flight %",
+}
+"""The per-run results :func:`report` gives the distribution of, and their labels."""
 
 
 def report(
     policy: str, margin: Margin, states: list, seeds: list[int], draws: dict, results: list[dict], limits, uncertainty
-) -> None:
+) -> dict:
+    """Prints one policy and margin setting's results; returns the printed numbers."""
     print(f"\n== policy {policy}; margins: {margin.label()} ==")
     print(f"{'initial state':>16} {'margin':>7}  {'within/runs':>9} {'rate':>7}  95 % Wilson CI")
+    numbers: dict = {"policy": policy, "margins": margin.label(), "states": []}
     for index, (height, speed, envelope_margin) in enumerate(states):
         mine = [r for seed, r in zip(seeds, results, strict=True) if seed % len(states) == index]
-        print(
-            f"{height:6.0f} ft {speed:4.0f} kt {envelope_margin:7.0f}  "
-            f"{_rate(sum(r['within'] for r in mine), len(mine))}"
-        )
-    print(f"{'all':>16} {'':>7}  {_rate(sum(r['within'] for r in results), len(results))}")
-    print(f"touchdown descent rate ft/s (limit {limits.max_descent_rate / FT:.0f}): "
-          f"{_percentiles([r['descent_ft_s'] for r in results])}")  # fmt: skip
-    print(f"touchdown |forward speed| kt (limit {limits.max_forward_speed / KT:.0f}): "
-          f"{_percentiles([r['speed_kt'] for r in results])}")  # fmt: skip
-    print(f"rotor minimum in flight % (limit {100 * limits.min_rotor_speed_ratio:.0f}): "
-          f"{_percentiles([r['rotor_min_pct'] for r in results])}")  # fmt: skip
-    print(f"rotor maximum in flight % (limit {100 * limits.max_rotor_speed_ratio:.0f}): "
-          f"{_percentiles([r['rotor_max_pct'] for r in results])}")  # fmt: skip
-    plans = sum(r["plans"] for r in results)
+        within = sum(r["within"] for r in mine)
+        print(f"{height:6.0f} ft {speed:4.0f} kt {envelope_margin:7.0f}  {_rate(within, len(mine))}")
+        numbers["states"].append(
+            {"height_ft": height, "speed_kt": speed, "envelope_margin": envelope_margin,
+             **success_rate(within, len(mine))}
+        )  # fmt: skip
+    within = sum(r["within"] for r in results)
+    numbers["all"] = success_rate(within, len(results))
+    print(f"{'all':>16} {'':>7}  {_rate(within, len(results))}")
+    limit_values = {
+        "descent_ft_s": limits.max_descent_rate / FT, "speed_kt": limits.max_forward_speed / KT,
+        "rotor_min_pct": 100 * limits.min_rotor_speed_ratio, "rotor_max_pct": 100 * limits.max_rotor_speed_ratio,
+    }  # fmt: skip
+    numbers["touchdown"] = {}
+    for key, label in TOUCHDOWN_QUANTITIES.items():
+        stats = summary((r[key] for r in results), tails=True)
+        numbers["touchdown"][key] = {**stats, "limit": limit_values[key]}
+        print(f"{label} (limit {limit_values[key]:.0f}): {_distribution(stats)}")
+    plans, unsafe = sum(r["plans"] for r in results), sum(r["unsafe_plans"] for r in results)
+    failed, wall = sum(r["failed_plans"] for r in results), float(np.median([r["wall_s"] for r in results]))
+    numbers.update(plans=plans, unsafe_plans=unsafe, failed_plans=failed, wall_per_run_median_s=wall)
     print(
-        f"plans {plans}, called not safe {sum(r['unsafe_plans'] for r in results)}, "
-        f"solver failures {sum(r['failed_plans'] for r in results)}; "
-        f"closed-loop wall per run median {np.median([r['wall_s'] for r in results]):.1f} s"
+        f"plans {plans}, called not safe {unsafe}, solver failures {failed}; "
+        f"closed-loop wall per run median {wall:.1f} s"
     )
     print("success by half of each range (lower half | upper half): what the failures lean on")
+    numbers["halves"] = {}
     for name in uncertainty.uncertain_quantities:
         interval = uncertainty.ranges()[name]
         halves: tuple[list[bool], list[bool]] = ([], [])
         for seed, r in zip(seeds, results, strict=True):
             halves[draws[seed].values()[name] > 0.5 * (interval.low + interval.high)].append(r["within"])
+        numbers["halves"][name] = [success_rate(sum(half), len(half)) for half in halves]
         print(f"  {name:24} " + " | ".join(_rate(sum(half), len(half)) for half in halves))
     failures = [(seed, r) for seed, r in zip(seeds, results, strict=True) if not r["within"]]
     if results and results[0]["truth_safe"] is not None:
         attainable = [r for r in results if r["truth_safe"]]
+        without = sum(not r["truth_safe"] for _, r in failures)
+        numbers["truth_check"] = {
+            "runs_without_safe_landing": len(results) - len(attainable), "failures_without_safe_landing": without,
+            "runs_with_one": success_rate(sum(r["within"] for r in attainable), len(attainable)),
+        }  # fmt: skip
         print(
             f"truth check: {len(results) - len(attainable)} of {len(results)} runs have no safe landing in their own "
-            f"true model (cold IPOPT), {sum(not r['truth_safe'] for _, r in failures)} of the {len(failures)} "
+            f"true model (cold IPOPT), {without} of the {len(failures)} "
             f"failures; runs with one: {_rate(sum(r['within'] for r in attainable), len(attainable))}"
         )
     print(f"failures ({len(failures)}): seed, initial state, latency, reason[, J of the true model's own plan]")
+    numbers["failures"] = []
     for seed, r in failures:
         height, speed, _ = states[seed % len(states)]
         truth = "" if r["truth_safe"] is None else f"; true model's own plan J {r['truth_value']:+.3f}"
@@ -264,6 +295,11 @@ def report(
             f"  seed {seed:4d}  {height:4.0f} ft {speed:4.0f} kt  latency {draws[seed].latency:.2f} s  "
             f"{r['reason']}{truth}"
         )
+        numbers["failures"].append(
+            {"seed": seed, "height_ft": height, "speed_kt": speed, "latency_s": draws[seed].latency,
+             "reason": r["reason"], **({} if r["truth_safe"] is None else {"truth_value": r["truth_value"]})}
+        )  # fmt: skip
+    return numbers
 
 
 def main() -> None:
@@ -284,11 +320,13 @@ def main() -> None:
     parser.add_argument(
         "--disturbance-gain", type=float, default=DisturbanceSettings().gain, help="the disturbance filter's gain"
     )
+    add_json_argument(parser)
     arguments = parser.parse_args()
+    record = Record.start()
     airframe, _, uncertainty = _context(arguments.uncertainty)
     states = initial_states()
     seeds = arguments.seeds or list(range(arguments.first_seed, arguments.first_seed + arguments.runs))
-    print(f"command: {' '.join(sys.argv)}; load average {loadavg_text()}")
+    print(f"command: {record.command}; load average {record.load_before}")
     print(
         f"uncertainty set {uncertainty.name!r} ({', '.join(uncertainty.uncertain_quantities)}), uniform draws; "
         f"{len(seeds)} runs per margin setting over {len(states)} initial states, {arguments.workers} workers"
@@ -299,6 +337,11 @@ def main() -> None:
         draw_sequence, noise_sequence = np.random.SeedSequence(seed).spawn(2)
         draws[seed] = uncertainty.draw(np.random.default_rng(draw_sequence))[0]
         noise_seeds[seed] = int(noise_sequence.generate_state(1)[0])
+    numbers: dict = {
+        "uncertainty_set": uncertainty.name, "uncertain_quantities": list(uncertainty.uncertain_quantities),
+        "runs": len(seeds), "initial_states": len(states), "workers": arguments.workers,
+        "disturbance_gain": arguments.disturbance_gain, "settings": [],
+    }  # fmt: skip
     for policy in arguments.policies:
         for margin in arguments.margins:
             started = time.perf_counter()
@@ -309,15 +352,20 @@ def main() -> None:
                 for seed in seeds
             ]  # fmt: skip
             results = run_tasks(tasks, arguments.workers)
-            report(policy, margin, states, seeds, draws, results, airframe.limits, uncertainty)
-            print(f"wall {time.perf_counter() - started:.0f} s; load average {loadavg_text()}")
+            setting = report(policy, margin, states, seeds, draws, results, airframe.limits, uncertainty)
+            setting["wall_s"] = time.perf_counter() - started
+            numbers["settings"].append(setting)
+            print(f"wall {setting['wall_s']:.0f} s; load average {loadavg_text()}")
     if not arguments.no_weight_check:
-        weight_check(arguments)
+        numbers["weight_check"] = weight_check(arguments)
     print(f"load average at the end {loadavg_text()}")
+    if arguments.json:
+        record.write(numbers)
 
 
-def weight_check(arguments: argparse.Namespace) -> None:
-    """The issue's acceptance case: +5 % weight the planner does not know, the demo's noise, 500 ft / 75 kt."""
+def weight_check(arguments: argparse.Namespace) -> list[dict]:
+    """The acceptance case: +5 % weight the planner does not know, the demo's noise, 500 ft / 75 kt. Prints and
+    returns each landing."""
     demo = load_scenario("demo_500ft_75kt")
     print("\n== unknown +5 % gross weight, 500 ft / 75 kt, the demo's sensor noise, no other error ==")
     tasks, keys = [], []
@@ -331,12 +379,19 @@ def weight_check(arguments: argparse.Namespace) -> None:
                          arguments.disturbance_gain)
                     )  # fmt: skip
                     keys.append((policy, margin, latency, seed))
+    landings = []
     for (policy, margin, latency, seed), r in zip(keys, run_tasks(tasks, arguments.workers), strict=True):
         verdict = "within limits" if r["within"] else f"OUTSIDE: {r['reason']}"
         print(
             f"  {policy:12} {margin.label():34} latency {latency:.2f} s seed {seed}: {r['descent_ft_s']:4.1f} ft/s "
             f"{r['speed_kt']:4.1f} kt rotor {r['rotor_min_pct']:.1f}-{r['rotor_max_pct']:.1f} %  {verdict}"
         )
+        landings.append(
+            {"policy": policy, "margins": margin.label(), "latency_s": latency, "seed": seed,
+             **{key: r[key] for key in TOUCHDOWN_QUANTITIES}, "within_limits": r["within"],
+             "reason": "" if r["within"] else r["reason"]}
+        )  # fmt: skip
+    return landings
 
 
 if __name__ == "__main__":

@@ -1,7 +1,7 @@
 """Solve-time percentiles of landing plans across the H-V plane, cold and warm, for each method.
 
 Run: .venv/bin/python bench/plan_latency.py [--states 60] [--airframe uh60a_class] [--baseline] [--method flyable]
-[--no-replans]
+[--no-replans] [--json]
 
 "Cold" solves start from the transcription's generic guess. Two warm starts are timed:
 "warm, half a cell" starts from the plan of a state 10 ft and 2.5 kt away — half a cell of the
@@ -10,7 +10,8 @@ default 41 × 25 envelope grid, the farthest the planner node's nearest stored p
 (~100 ft / ~17 kt away). With the flyable method, a third warm start is what the planner node does
 during a descent: the re-plans of lock-step closed-loop descents from 8 states (the demo scenario's 5 %
 drag mismatch and noise), each warm from the plan being flown. Times are IPOPT wall time per solve; the
-replay, which follows every solve, is timed separately. Prints what it measured on this machine and the load average.
+replay, which follows every solve, is timed separately. Prints what it measured on this machine and the load average;
+``--json`` also writes it to docs/results/data/plan_latency.json.
 
 ``--baseline`` also runs the legacy configuration (IPOPT's warm-solver options of then,
 plain CasADi functions, MUMPS), the warm options alone, (verified, flyable) the six-state NLP, distance and engine
@@ -26,13 +27,11 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import os
-import platform
-import sys
 import time
 
 import numpy as np
-from baseline_config import baseline_codegen, baseline_settings, loadavg_text, six_state_settings, with_mumps
+from _common import Record, StateGrid, add_json_argument, loadavg_text, machine_text, summary, summary_text
+from baseline_config import baseline_codegen, baseline_settings, six_state_settings, with_mumps
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
@@ -46,23 +45,8 @@ from helireach_ros.core.units import FT, KT
 _COMMIT_HEIGHT_FT = 20.0  # the flyable plans' commit height: below it, at speed, the NLP is nearly infeasible
 
 
-def _serpentine_grid(count: int) -> list[tuple[float, float]]:
-    """About ``count`` (height ft, speed kt) points over 0–800 ft × 0–120 kt, neighbours consecutive."""
-    rows = max(2, round(float(np.sqrt(count * 8 / 12))))
-    columns = max(2, int(np.ceil(count / rows)))
-    heights = np.linspace(10.0, 800.0, rows)
-    speeds = np.linspace(0.0, 120.0, columns)
-    points = []
-    for row, height in enumerate(heights):
-        ordered = speeds if row % 2 == 0 else speeds[::-1]
-        points.extend((float(height), float(speed)) for speed in ordered)
-    return points
-
-
-def _percentiles(samples: list[float]) -> str:
-    array = np.asarray(samples)
-    p50, p95 = np.percentile(array, [50, 95])
-    return f"p50 {p50:7.1f} ms   p95 {p95:7.1f} ms   max {array.max():7.1f} ms"
+def _percentiles(stats: dict) -> str:
+    return summary_text(stats, width=7, n=False)
 
 
 def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str, PlannerSettings, CodegenSettings]]:
@@ -88,13 +72,16 @@ def _configurations(settings: PlannerSettings, baseline: bool) -> list[tuple[str
     ]
 
 
-def _run_method(airframe, method: str, points, baseline: bool) -> None:
+def _run_method(airframe, method: str, points, baseline: bool) -> dict:
+    """Cold, warm and replay times of every configuration on ``points``: prints them and returns them."""
     configurations = _configurations(load_settings(method=method), baseline)
     planners = []
+    numbers: dict = {"configurations": {}}
     for name, settings, codegen in configurations:
         planner = LandingPlanner(airframe, settings, codegen)
         planners.append(planner)
         print(f"\nmethod {method}, {name}: NLP built in {planner.build_time_s:.2f} s on {planner.nlp_functions}")
+        numbers["configurations"][name] = {"nlp_build_s": planner.build_time_s, "nlp_functions": planner.nlp_functions}
     samples = [{"cold": [], "near": [], "far": [], "replay": [], "iterations": [], "statuses": {}} for _ in planners]
     disagreements, value_gap = 0, 0.0
     previous = [None] * len(planners)
@@ -119,29 +106,38 @@ def _run_method(airframe, method: str, points, baseline: bool) -> None:
         disagreements += len({plan.status for plan in near_plans}) > 1
         value_gap = max(value_gap, max(abs(plan.value - near_plans[0].value) for plan in near_plans))
     for (name, _, _), sample in zip(configurations, samples, strict=True):
-        print(f"\nmethod {method}, {name}: cold statuses {sample['statuses']}")
-        print(f"  cold solve        {_percentiles(sample['cold'])}")
-        print(
-            f"  warm, half a cell {_percentiles(sample['near'])}   (from a plan 10 ft / 2.5 kt away; "
-            f"{np.mean(sample['iterations']):.1f} iterations)"
-        )
         solved_heights = [height + 10.0 for height, _ in points]  # the half-a-cell states
         pairs = zip(sample["near"], solved_heights, strict=True)
         above = [time for time, height in pairs if height > _COMMIT_HEIGHT_FT]
-        print(f"    above {_COMMIT_HEIGHT_FT:.0f} ft only  {_percentiles(above)}   ({len(above)} states)")
-        print(f"  warm, far         {_percentiles(sample['far'])}   (from the previous serpentine state's plan)")
-        print(f"  replay + decode   {_percentiles(sample['replay'])}")
+        stats = {kind: summary(sample[kind]) for kind in ("cold", "near", "far", "replay")}
+        stats["near_above_commit"] = summary(above)
+        iterations = float(np.mean(sample["iterations"]))
+        print(f"\nmethod {method}, {name}: cold statuses {sample['statuses']}")
+        print(f"  cold solve        {_percentiles(stats['cold'])}")
+        print(
+            f"  warm, half a cell {_percentiles(stats['near'])}   (from a plan 10 ft / 2.5 kt away; "
+            f"{iterations:.1f} iterations)"
+        )
+        above_text = _percentiles(stats["near_above_commit"])
+        print(f"    above {_COMMIT_HEIGHT_FT:.0f} ft only  {above_text}   ({len(above)} states)")
+        print(f"  warm, far         {_percentiles(stats['far'])}   (from the previous serpentine state's plan)")
+        print(f"  replay + decode   {_percentiles(stats['replay'])}")
+        numbers["configurations"][name].update(
+            cold_statuses=sample["statuses"], near_iterations_mean=iterations, **stats
+        )
     if baseline:
         print(f"\nmethod {method}: ratios of total solve time to '{configurations[0][0]}' (same states, same run)")
+        numbers["ratios_to"] = configurations[0][0]
         for (name, _, _), sample in zip(configurations, samples, strict=True):
-            ratios = [
-                f"{kind} {np.sum(sample[kind]) / np.sum(samples[0][kind]):.3f}x" for kind in ("cold", "near", "far")
-            ]
-            print(f"  {name:32s} {', '.join(ratios)}")
+            ratios = {kind: np.sum(sample[kind]) / np.sum(samples[0][kind]) for kind in ("cold", "near", "far")}
+            print(f"  {name:32s} {', '.join(f'{kind} {ratio:.3f}x' for kind, ratio in ratios.items())}")
+            numbers["configurations"][name]["ratios"] = ratios
         print(
             f"  warm half-a-cell plans: status differs between configurations at {disagreements} of {len(points)} "
             f"states; max |value difference| {value_gap:.1e}"
         )
+        numbers.update(status_disagreements=disagreements, max_value_difference=value_gap)
+    return numbers
 
 
 _REPLAN_STARTS = ((500, 75), (300, 40), (700, 20), (250, 100), (400, 110), (800, 60), (600, 90), (150, 60))
@@ -183,10 +179,11 @@ def _warm_start_for(planner: LandingPlanner, recorded_on: LandingPlanner, warm_s
     )
 
 
-def _run_replans(airframe, method: str, baseline: bool) -> None:
+def _run_replans(airframe, method: str, baseline: bool) -> dict:
     """Re-plans as the planner node makes them: along closed-loop descents of the demo scenario (5 % drag
     mismatch, sensor noise, re-planning every 0.25 s from the control being flown, warm from the current plan),
-    recorded once and then timed for each configuration, interleaved re-plan by re-plan."""
+    recorded once and then timed for each configuration, interleaved re-plan by re-plan. Prints and returns the
+    times."""
     configurations = _configurations(load_settings(method=method), baseline)
     planners = [LandingPlanner(airframe, settings, codegen) for _, settings, codegen in configurations]
     # recorded on the six-state NLP when one is compared: its warm starts reduce exactly to the closed-form layout
@@ -212,18 +209,26 @@ def _run_replans(airframe, method: str, baseline: bool) -> None:
         f"({len(recorder.replans)} re-plans, warm from the current plan; {landed} of {len(_REPLAN_STARTS)} "
         "descents landed within limits)"
     )
+    numbers: dict = {
+        "scenario": scenario.name, "descents": len(_REPLAN_STARTS), "replans": len(recorder.replans),
+        "landed_within_limits": landed, "configurations": {},
+    }  # fmt: skip
     for (name, _, _), rows, counts in zip(configurations, samples, statuses, strict=True):
-        times = [time_ms for time_ms, _, _ in rows]
-        converged = [time_ms for time_ms, _, success in rows if success]
-        iterations = np.mean([count for _, count, _ in rows])
+        times = summary(time_ms for time_ms, _, _ in rows)
+        converged = summary(time_ms for time_ms, _, success in rows if success)
+        iterations = float(np.mean([count for _, count, _ in rows]))
         print(f"  {name}: {_percentiles(times)}   ({iterations:.1f} iterations; statuses {counts})")
-        print(f"    converged only  {_percentiles(converged)}   ({len(converged)} re-plans)")
+        print(f"    converged only  {_percentiles(converged)}   ({converged['n']} re-plans)")
+        numbers["configurations"][name] = {
+            "solve": times, "converged": converged, "iterations_mean": iterations, "statuses": counts
+        }
     if baseline:
         totals = [sum(time_ms for time_ms, _, _ in rows) for rows in samples]
-        ratios = ", ".join(
-            f"{name} {total / totals[0]:.3f}x" for (name, _, _), total in zip(configurations, totals, strict=True)
-        )
-        print(f"  total re-plan solve time relative to '{configurations[0][0]}': {ratios}")
+        ratios = {name: total / totals[0] for (name, _, _), total in zip(configurations, totals, strict=True)}
+        text = ", ".join(f"{name} {ratio:.3f}x" for name, ratio in ratios.items())
+        print(f"  total re-plan solve time relative to '{configurations[0][0]}': {text}")
+        numbers.update(ratios_to=configurations[0][0], ratios=ratios)
+    return numbers
 
 
 def main() -> None:
@@ -235,18 +240,27 @@ def main() -> None:
     parser.add_argument(
         "--no-replans", action="store_true", help="skip the re-plans along closed-loop descents (flyable only)"
     )
+    add_json_argument(parser)
     arguments = parser.parse_args()
+    record = Record.start()
     airframe = load_airframe(arguments.airframe)
-    points = _serpentine_grid(arguments.states)
-    print(f"command: {' '.join(sys.argv)}")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; {len(points)} states")
-    print(f"load average before: {loadavg_text()}")
+    grid = StateGrid.of_about(arguments.states)
+    points = grid.cells(serpentine=True)
+    print(f"command: {record.command}")
+    print(f"machine: {machine_text()}; {len(points)} states")
+    print(f"load average before: {record.load_before}")
     methods = ("flyable", "verified", "paper") if arguments.method == "all" else (arguments.method,)
+    numbers: dict = {
+        "airframe": arguments.airframe, "states": len(points), "grid": grid.describe(),
+        "commit_height_ft": _COMMIT_HEIGHT_FT, "methods": {},
+    }  # fmt: skip
     for method in methods:
-        _run_method(airframe, method, points, arguments.baseline)
+        numbers["methods"][method] = _run_method(airframe, method, points, arguments.baseline)
     if "flyable" in methods and not arguments.no_replans:
-        _run_replans(airframe, "flyable", arguments.baseline)
+        numbers["replans"] = _run_replans(airframe, "flyable", arguments.baseline)
     print(f"\nload average after: {loadavg_text()}")
+    if arguments.json:
+        record.write(numbers)
 
 
 if __name__ == "__main__":

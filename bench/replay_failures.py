@@ -1,20 +1,24 @@
 """How often does each transcription call a state safe that its own replay does not land?
 
-Run: .venv/bin/python bench/replay_failures.py [--heights 17] [--speeds 13] [--only flyable]
+Run: .venv/bin/python bench/replay_failures.py [--heights 17] [--speeds 13] [--only flyable] [--json]
 
 Over a grid of failure states (0–800 ft × 0–120 kt, total power loss, uh60a_class), each variant
 solves every state cold. For each variant it prints: cells whose NLP value is ≤ 0 ("NLP-safe"),
 how many of those fail the independent CVODES replay (the variant's optimism), how many cells it
-calls safe that the finest verified variant calls unsafe, and the median/p95 solve time.
+calls safe that the finest verified variant calls unsafe, and the median/p95 solve time; ``--json`` also writes
+them to docs/results/data/replay_failures.json. The default grid takes ~12 minutes on 2 cores, most of it the
+``paper N=60`` variant (~2 s a state); ``--heights 9 --speeds 7`` (63 states, ~3.5 minutes) is what ``make bench``
+runs.
 """
 
 from __future__ import annotations
 
 import argparse
+import textwrap
 import time
 
 import numpy as np
-from baseline_config import loadavg_text
+from _common import COARSE_GRID, Record, StateGrid, add_json_argument, loadavg_text, summary
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.model import initial_state_after_failure
@@ -35,18 +39,26 @@ VARIANTS = {
     "flyable + 1 s delay": PlannerSettings(reaction_delay_s=1.0),
 }
 REFERENCE = "verified K=80 d=3 (reference)"  # the paper's problem, finely resolved; flyable plans solve another one
+NOTE = (
+    "'safe but ref unsafe' counts cells a variant would call safe (paper: by its NLP value, as the paper does; "
+    "verified and flyable: after its replay check) that the reference calls unsafe or unverified. The reference "
+    "solves the paper's problem; the flyable rows solve another (attitude, rate and touchdown limits, but a "
+    "touchdown rotor limit of 80 %), so their count is a difference of problems, not optimism: each flyable "
+    "'safe' passed its own replay, judged at ground contact against every flyability limit."
+)
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--heights", type=int, default=17)
-    parser.add_argument("--speeds", type=int, default=13)
+    parser.add_argument("--heights", type=int, default=len(COARSE_GRID.heights()))
+    parser.add_argument("--speeds", type=int, default=len(COARSE_GRID.speeds()))
     parser.add_argument("--only", default="", help="run only variants whose name contains this (plus the reference)")
+    add_json_argument(parser)
     arguments = parser.parse_args()
+    record = Record.start()
     airframe = load_airframe("uh60a_class")
-    heights_ft = np.linspace(0.0, 800.0, arguments.heights)
-    speeds_kt = np.linspace(0.0, 120.0, arguments.speeds)
-    cells = [(h, v) for h in heights_ft for v in speeds_kt]
+    grid = StateGrid(f"0:800:{arguments.heights}", f"0:120:{arguments.speeds}")
+    cells = grid.cells()
     results: dict[str, list] = {}
     for name, settings in VARIANTS.items():
         if arguments.only not in name and name != REFERENCE:
@@ -56,13 +68,14 @@ def main() -> None:
         plans = [planner.plan(initial_state_after_failure(airframe, h * FT, v * KT)) for h, v in cells]
         results[name] = [plans, time.perf_counter() - started]
     reference_unsafe = np.array([plan.status != "safe" for plan in results[REFERENCE][0]])
-    print(f"{len(cells)} cells: heights 0-800 ft x {arguments.heights}, speeds 0-120 kt x {arguments.speeds}")
+    print(f"{len(cells)} cells: {grid.describe()}")
     header = (
         f"{'variant':32s} {'NLP-safe':>8s} {'replay fails':>13s} {'fail %':>7s} {'safe':>5s} {'failed':>6s} "
         f"{'safe but ref unsafe':>19s} {'median ms':>9s} {'p95 ms':>7s} {'total s':>7s}"
     )
-    print(f"load average before (1/5/15 min): {loadavg_text()}")
+    print(f"load average before (1/5/15 min): {record.load_before}")
     print(header)
+    rows = {}
     for name, (plans, total_s) in results.items():
         nlp_safe = np.array([plan.value <= 0.0 and plan.solver.success for plan in plans])
         replay_fails = nlp_safe & np.array([not plan.verified for plan in plans])
@@ -70,18 +83,23 @@ def main() -> None:
         failed = sum(plan.status == "failed" for plan in plans)
         claimed_safe = nlp_safe if name.startswith("paper") else safe
         optimistic = int(np.sum(claimed_safe & reference_unsafe))
-        times = np.array([plan.solver.solve_time_ms for plan in plans])
+        times = summary(plan.solver.solve_time_ms for plan in plans)
         share = 100.0 * replay_fails.sum() / max(nlp_safe.sum(), 1)
         print(
             f"{name:32s} {nlp_safe.sum():8d} {replay_fails.sum():13d} {share:6.1f}% {safe.sum():5d} {failed:6d} "
-            f"{optimistic:19d} {np.median(times):9.1f} {np.percentile(times, 95):7.1f} {total_s:7.1f}"
+            f"{optimistic:19d} {times['median']:9.1f} {times['p95']:7.1f} {total_s:7.1f}"
         )
-    print("\n'safe but ref unsafe' counts cells a variant would call safe (paper: by its NLP value, as the paper does;")
-    print("verified and flyable: after its replay check) that the reference calls unsafe or unverified. The reference")
-    print("solves the paper's problem; the flyable rows solve another (attitude, rate and touchdown limits, but a")
-    print("touchdown rotor limit of 80 %), so their count is a difference of problems, not optimism: each flyable")
-    print("'safe' passed its own replay, judged at ground contact against every flyability limit.")
+        rows[name] = {
+            "nlp_safe": nlp_safe.sum(), "replay_fails": replay_fails.sum(), "replay_fail_percent": share,
+            "safe": safe.sum(), "failed": failed, "safe_but_reference_unsafe": optimistic, "solve_ms": times,
+            "total_s": total_s,
+        }  # fmt: skip
+    print()
+    print(textwrap.fill(NOTE, width=110))
     print(f"load average after (1/5/15 min): {loadavg_text()}")
+    if arguments.json:
+        record.write({"airframe": "uh60a_class", "cells": len(cells), "grid": grid.describe(), "reference": REFERENCE,
+                      "variants": rows})  # fmt: skip
 
 
 if __name__ == "__main__":

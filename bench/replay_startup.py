@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import rclpy
+from _common import command_line, loadavg_text, summary
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -44,11 +45,6 @@ def _write_log(path: Path) -> None:
         writer.add_topic(rm.TOPIC_ODOMETRY, "nav_msgs/msg/Odometry", _STREAM)
         for i in range(50):
             writer.write(rm.TOPIC_ODOMETRY, serialize_message(Odometry()), t0 + i * 20_000_000)
-
-
-def _median(values: list[float]) -> float:
-    ordered = sorted(values)
-    return ordered[len(ordered) // 2]
 
 
 def main() -> None:
@@ -93,15 +89,15 @@ def main() -> None:
         node.destroy_node()
         rclpy.try_shutdown(context=context)
 
-    print(f"command: {' '.join([sys.executable, *sys.argv])}")
-    print(f"load average (1, 5, 15 min): {os.getloadavg()}")
+    print(f"command: {command_line()}")
+    print(f"load average (1/5/15 min): {loadavg_text()}")
     print(f"python -c 'import helireach_ros.ros.replay': {import_s:.3f} s (interpreter start + imports)")
     print(f"replay with nobody listening (waits at most DISCOVERY_WAIT_S = {DISCOVERY_WAIT_S} s): {alone_s:.3f} s")
     print(
-        f"launch -> first message here, {arguments.runs} runs: median {_median(to_first):.3f} s, "
+        f"launch -> first message here, {arguments.runs} runs: median {summary(to_first)['median']:.3f} s, "
         f"min {min(to_first):.3f} s, max {max(to_first):.3f} s"
     )
-    print(f"launch -> exit (1 s of log at rate 1): median {_median(to_exit):.3f} s")
+    print(f"launch -> exit (1 s of log at rate 1): median {summary(to_exit)['median']:.3f} s")
 
 
 if __name__ == "__main__":

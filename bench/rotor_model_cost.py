@@ -17,7 +17,7 @@ import time
 
 import casadi as ca
 import numpy as np
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.compiled_nlp import CodegenSettings
@@ -68,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
               + f"  ({planner.nlp_functions.split('(')[0].strip()})", flush=True)  # fmt: skip
     ratios = {key: results["momentum"][key] / results["paper"][key] for key in results["paper"]}
     print("momentum / paper: " + "  ".join(f"{key} {value:.2f}x" for key, value in ratios.items()))
-    print(f"load {loadavg_text()}; command: .venv/bin/python bench/rotor_model_cost.py {' '.join(sys.argv[1:])}")
+    print(f"load {loadavg_text()}; command: {command_line()}")
     return 0
 
 

@@ -19,8 +19,7 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text, summary
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
 from rclpy.context import Context
@@ -46,10 +45,10 @@ def resident_mb() -> float:
 
 
 def percentile_text(samples: list[float]) -> str:
-    if not samples:
+    stats = summary(samples)
+    if not stats["n"]:
         return "    ---"
-    p50, p95 = np.percentile(samples, [50, 95])
-    return f"{p50:5.1f}/{p95:5.1f}/{max(samples):6.1f}"
+    return f"{stats['median']:5.1f}/{stats['p95']:5.1f}/{stats['max']:6.1f}"
 
 
 def main() -> int:
@@ -60,7 +59,7 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=7)
     arguments = parser.parse_args()
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
-    print(f"bench/soak.py {' '.join(sys.argv[1:])}: load average {loadavg_text()}")
+    print(f"command: {command_line()}; load average {loadavg_text()}")
     with tempfile.TemporaryDirectory() as log_dir:
         system = build_system(log_dir=log_dir, context=Context())
         try:
@@ -149,7 +148,7 @@ def soak(system, arguments: argparse.Namespace) -> int:
             latencies.clear()
             failure_latencies.clear()
             interval_start = now
-    print(f"reproduce: .venv/bin/python bench/soak.py {' '.join(sys.argv[1:])}")
+    print(f"reproduce: {command_line()}")
     return 0
 
 

@@ -23,7 +23,7 @@ import sys
 import time
 
 import numpy as np
-from baseline_config import loadavg_text, results_footer
+from _common import loadavg_text, results_footer
 
 from helireach_ros.core.airframe import Airframe, load_airframe
 from helireach_ros.core.inflow import InflowModel

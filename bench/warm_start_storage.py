@@ -2,13 +2,14 @@
 
 Run: .venv/bin/python bench/warm_start_storage.py [--envelope FILE] [--states 60] [--seed 1]
 
-The shipped envelope stores, per node, the plan's control function (what a fallback flies) and IPOPT's solution
-(primal, bound and constraint multipliers: 93 % of the file). For random level-flight failure states (uniform in
-20-780 ft, 0-118 kt) this solves each from the nearest stored plan with the warm start as stored (float32), rounded
-to float16, primal only (multipliers zero) in float32 and float16, the primal rebuilt from the stored control
-function alone (``ControlFunctionWarmStart``: the function flown from the node's state), and cold; it prints
-iterations and solve time (median, p95), whether the status equals the cold solve's, the time the rebuild takes,
-and the compressed size of each storage option.
+An envelope holds, per node, the plan's control function (what a fallback flies) and, in the file (format versions 1
+and 2) or in the user cache (version 3, written by ``helireach envelope compute``), IPOPT's solution (primal, bound
+and constraint multipliers: 93 % of a version-2 file). It needs that solver state. For random level-flight failure
+states (uniform in 20-780 ft, 0-118 kt) this solves each from the nearest stored plan with the warm start as stored
+(float32), rounded to float16, primal only (multipliers zero) in float32 and float16, the primal rebuilt from the
+stored control function alone (``ControlFunctionWarmStart``: the function flown from the node's state), and cold; it
+prints iterations and solve time (median, p95), whether the status equals the cold solve's, the time the rebuild
+takes, and the compressed size of each storage option.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import time
 import warnings
 
 import numpy as np
-from baseline_config import loadavg_text
+from _common import command_line, loadavg_text, summary
 
 from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, read_envelope_file
@@ -66,9 +67,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--states", type=int, default=60)
     parser.add_argument("--seed", type=int, default=1)
     arguments = parser.parse_args(argv)
-    print(f"command: .venv/bin/python bench/warm_start_storage.py {' '.join(sys.argv[1:])}")
+    print(f"command: {command_line()}")
     print(f"load average (1/5/15 min): {loadavg_text()}")
     envelope = read_envelope_file(arguments.envelope)
+    if envelope.solver_state is None:
+        print(f"{arguments.envelope}: no solver state (not in the file, not in the user cache); compute the envelope "
+              "with 'helireach envelope compute', which caches it, and pass it with --envelope")  # fmt: skip
+        return 2
     airframe = load_airframe(envelope.airframe_name)
     planner = get_planner(airframe, load_settings())
     print(f"NLP functions: {planner.nlp_functions}; linear solver: {planner.linear_solver}")
@@ -100,18 +105,19 @@ def main(argv: list[str] | None = None) -> int:
     print("| warm start | median iterations | p95 iterations | median ms | p95 ms | status as cold |")
     print("|---|---|---|---|---|---|")
     for name, rows in results.items():
-        iterations = np.array([row[0] for row in rows])
-        times = np.array([row[1] for row in rows])
+        iterations, times = summary(row[0] for row in rows), summary(row[1] for row in rows)
         same = sum(row[2] for row in rows)
-        print(f"| {name} | {np.median(iterations):.0f} | {np.percentile(iterations, 95):.0f} | {np.median(times):.1f} "
-              f"| {np.percentile(times, 95):.1f} | {same}/{len(rows)} |")  # fmt: skip
-    print(f"rebuilding a primal from a control function: median {np.median(rebuild_ms):.1f} ms, "
-          f"p95 {np.percentile(rebuild_ms, 95):.1f} ms (in plan(), before the solve)")  # fmt: skip
+        print(f"| {name} | {iterations['median']:.0f} | {iterations['p95']:.0f} | {times['median']:.1f} "
+              f"| {times['p95']:.1f} | {same}/{len(rows)} |")  # fmt: skip
+    rebuild = summary(rebuild_ms)
+    print(f"rebuilding a primal from a control function: median {rebuild['median']:.1f} ms, "
+          f"p95 {rebuild['p95']:.1f} ms (in plan(), before the solve)")  # fmt: skip
     arrays = envelope.arrays
     answers = {name: array for name, array in arrays.items() if not name.startswith("plan_")}
     controls = {name: arrays[name] for name in ("plan_control_times", "plan_control_values")}
-    primal = arrays["plan_primal"]
-    multipliers = {name: arrays[name] for name in ("plan_bound_multipliers", "plan_constraint_multipliers")}
+    solver_state = envelope.solver_state
+    primal = solver_state["plan_primal"]
+    multipliers = {name: solver_state[name] for name in ("plan_bound_multipliers", "plan_constraint_multipliers")}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # float16 overflow: counted below
         sizes = _sizes(answers, controls, primal, multipliers)
