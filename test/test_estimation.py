@@ -36,8 +36,7 @@ def test_the_closed_loop_with_an_unknown_5_percent_weight_lands_when_it_estimate
     """+5 % weight the airframe file does not know: with the file's weight the closed loop lands outside the limits
     (test_closed_loop, re-planning without the disturbance estimate); estimating the weight from the power before
     the failure, the same policy lands within them. (With the disturbance estimate on as well the landing is at
-    the speed limit, 5.7–6.3 kt for latencies 0.05–0.15 s with either NLP: a knife edge, see
-    docs/results/measurements-log.md.)"""
+    the speed limit, 5.7–6.3 kt for latencies 0.05–0.15 s with either NLP: a knife edge.)"""
     heavy = dataclasses.replace(load_scenario("demo_500ft_75kt"), parameter_mismatch={"gross_weight": 0.05})
     result = fly_closed_loop(
         SimulatedVehicle(heavy, airframe, settings),

@@ -15,7 +15,7 @@ one 2×2 pivot in a minimum-degree block order, and reads the inertia off the 2�
 inertia). It implements MA27's four routines, so IPOPT loads it with its own options ``linear_solver ma27`` and
 ``hsllib <library>``; HSL itself is not used.
 
-Measured (docs/results/measurements-log.md): 0.46–0.50× of MUMPS's IPOPT time on flyable plans with about the
+Measured (docs/decisions/block-ldl.md): 0.46–0.50× of MUMPS's IPOPT time on flyable plans with about the
 same iterations and the same statuses and replay verdicts at 60 of 60 states, the 41 × 25 envelope classified
 identically at all 1025 nodes, and the inertia right in every checked factorization. It is a performance choice
 like the compiled NLP functions (:class:`~helireach_ros.core.compiled_nlp.CodegenSettings`, not the planner

@@ -46,7 +46,7 @@ class DisturbanceSettings:
     Attributes:
         gain: g, the fraction of each interval's prediction error taken into the estimate (1: the last
             interval's error alone; smaller: averaged over ~1/g intervals, less sensor noise). 0.3 by measurement
-            (``bench/monte_carlo.py --policies disturbance --disturbance-gain G``; docs/results/measurements-log.md).
+            (``bench/monte_carlo.py --policies disturbance --disturbance-gain G``; docs/method/envelopes.md).
         relative_tolerance: of the prediction's integrator.
     """
 

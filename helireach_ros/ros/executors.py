@@ -15,7 +15,7 @@ executor *kind*:
 rclpy's ``MultiThreadedExecutor`` is not offered: in rclpy 7.1 its dispatch loop spins on ready
 callbacks and starves every other thread of the GIL. Under it the composed demo's re-plans arrived
 up to 1.8 s late, and with the planner's solver thread the failure-latency bench got no plan at all
-within 10 s (docs/results/measurements-log.md, "Failure to trajectory").
+within 10 s (docs/decisions/solver-threads.md).
 
 rclpy is imported on first use, so command-line parsers can offer the kinds cheaply. :func:`run_node` is the
 body of every node's ``main`` (ros2/demos style: ``sys.exit(run_node(NodeClass, args))``); it also answers

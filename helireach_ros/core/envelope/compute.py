@@ -726,7 +726,7 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
         "software": {
             "helireach_ros": __version__,
             # requested: a worker without a C compiler solves with MUMPS (the answers agree;
-            # docs/results/measurements-log.md)
+            # docs/decisions/block-ldl.md)
             "linear_solver": (job.codegen or CodegenSettings.from_environment()).linear_solver,
             "casadi": casadi.__version__,
             "numpy": np.__version__,
