@@ -1,7 +1,7 @@
 """What the benches' ``--baseline`` runs: the legacy planner configuration.
 
-Imported by the bench scripts (which run with ``bench/`` on ``sys.path``); the helpers every bench shares (load
-average, commit, results records) are in ``_common.py``.
+Imported by the bench scripts (which run with ``bench/`` on ``sys.path``); the helpers every bench shares (the load
+average, ``loadavg_text``; commit; results records) are in ``_common.py``.
 """
 
 from __future__ import annotations

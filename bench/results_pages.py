@@ -454,6 +454,12 @@ def main(argv: list[str] | None = None) -> int:
         path.write_text(render_page(page, arguments.data))
         missing = [s.bench for s in page.sections if not (arguments.data / f"{s.bench}.json").exists()]
         print(f"wrote {path}" + (f" (not measured yet: {', '.join(missing)})" if missing else ""))
+        for section in page.sections:  # the load each record was measured at (the benches' loadavg_text)
+            record_path = arguments.data / f"{section.bench}.json"
+            if record_path.exists():
+                record = json.loads(record_path.read_text())
+                print(f"  {section.bench}: commit {record['commit']}, {record['date_utc']}, load average "
+                      f"{record['load_before']} -> {record['load_after']}")  # fmt: skip
     return 0
 
 
