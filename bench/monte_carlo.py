@@ -2,7 +2,8 @@
 
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
-     [--policies none weight disturbance weight+disturbance ...] [--truth-check] [--json]
+     [--policies none weight disturbance weight+disturbance ...] [--objectives terminal reach_avoid]
+     [--truth-check] [--json]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -38,6 +39,10 @@ margin setting, on the same draws): ``weight``: plan for the gross weight estima
 the steady flight before the failure (:mod:`helireach_ros.core.estimation`, which also absorbs the drag and
 c_d errors into that weight); ``disturbance``: re-plan for the model plus the disturbance accelerations
 learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.disturbance`).
+
+Objectives (``--objectives``, the planner settings' ``objective``; each is run with every policy and margin
+setting, on the same draws): ``terminal`` (the touchdown cost, limits hard) or ``reach_avoid`` (the worst
+normalised margin, :class:`~helireach_ros.core.settings.PlannerSettings`).
 """
 
 from __future__ import annotations
@@ -59,7 +64,7 @@ from helireach_ros.core.disturbance import DisturbanceSettings
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.robust_verification import model_vehicle, own_landing
-from helireach_ros.core.settings import PlannerSettings, load_settings
+from helireach_ros.core.settings import OBJECTIVES, PlannerSettings, load_settings
 from helireach_ros.core.simulation import Scenario, load_scenario
 from helireach_ros.core.uncertainty import (
     DEFAULT_UNCERTAINTY_FILE,
@@ -169,6 +174,8 @@ def fly(task: tuple) -> dict:
     uncertainty_file, margin, height_ft, speed_kt, model, noise, noise_seed, policy, disturbance_gain = task[:9]
     truth_check = len(task) > 9 and task[9]
     airframe, settings, _ = _context(uncertainty_file)
+    if len(task) > 10:
+        settings = settings.replace(objective=task[10])
     planner = get_planner(margin.planning_airframe(airframe), settings)
     scenario = Scenario(
         name="monte_carlo", height=height_ft * FT, forward_speed=speed_kt * KT, noise=noise, seed=noise_seed
@@ -315,6 +322,9 @@ def main() -> None:
         "--policies", type=parse_policy, nargs="+", default=["none"], help="re-planning policies (see the docstring)"
     )
     parser.add_argument(
+        "--objectives", nargs="+", choices=OBJECTIVES, default=[None], help="planner objectives (default: the file's)"
+    )
+    parser.add_argument(
         "--truth-check", action="store_true", help="also solve each run's landing in its true model (see docstring)"
     )
     parser.add_argument(
@@ -342,20 +352,25 @@ def main() -> None:
         "runs": len(seeds), "initial_states": len(states), "workers": arguments.workers,
         "disturbance_gain": arguments.disturbance_gain, "settings": [],
     }  # fmt: skip
-    for policy in arguments.policies:
-        for margin in arguments.margins:
-            started = time.perf_counter()
-            tasks = [
-                (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
-                 uncertainty.sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain,
-                 arguments.truth_check)
-                for seed in seeds
-            ]  # fmt: skip
-            results = run_tasks(tasks, arguments.workers)
-            setting = report(policy, margin, states, seeds, draws, results, airframe.limits, uncertainty)
-            setting["wall_s"] = time.perf_counter() - started
-            numbers["settings"].append(setting)
-            print(f"wall {setting['wall_s']:.0f} s; load average {loadavg_text()}")
+    file_objective = _context(arguments.uncertainty)[1].objective
+    for objective in arguments.objectives:
+        objective = objective or file_objective
+        for policy in arguments.policies:
+            for margin in arguments.margins:
+                started = time.perf_counter()
+                print(f"\n== objective {objective} ==")
+                tasks = [
+                    (arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
+                     uncertainty.sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain,
+                     arguments.truth_check, objective)
+                    for seed in seeds
+                ]  # fmt: skip
+                results = run_tasks(tasks, arguments.workers)
+                setting = report(policy, margin, states, seeds, draws, results, airframe.limits, uncertainty)
+                setting["objective"] = objective
+                setting["wall_s"] = time.perf_counter() - started
+                numbers["settings"].append(setting)
+                print(f"wall {setting['wall_s']:.0f} s; load average {loadavg_text()}")
     if not arguments.no_weight_check:
         numbers["weight_check"] = weight_check(arguments)
     print(f"load average at the end {loadavg_text()}")

@@ -223,6 +223,18 @@ def test_the_solver_state_cache_follows_its_environment_variable(small, tmp_path
     assert solver_state_path(small.checksum).is_file()
 
 
+def test_a_setting_a_file_predates_counts_as_its_default(small, settings):
+    """A planner setting added later, with the behaviour before it as its default, does not invalidate a file
+    computed before it existed; a changed value of it does."""
+    from helireach_ros.core.envelope.data import settings_differences
+
+    stored = {name: value for name, value in small.metadata["settings"].items() if name != "objective"}
+    assert settings_differences(stored, settings) == []
+    assert settings_differences(stored, settings.replace(objective="reach_avoid")) == [
+        "objective: 'terminal' != 'reach_avoid'"
+    ]
+
+
 # --- refusing bad files ----------------------------------------------------------------------------------
 
 

@@ -238,3 +238,23 @@ def test_closed_form_states_solve_the_six_state_nlp(uh60, method):
 def test_closed_form_states_setting_is_validated():
     with pytest.raises(ConfigError, match="closed_form_states"):
         PlannerSettings(closed_form_states=1)
+
+
+def test_the_reach_avoid_objective_keeps_the_statuses_and_buys_rotor_margin(uh60):
+    """The reach-avoid value minimises the worst normalised margin with the limits still hard, so it calls the same
+    states safe as the touchdown cost; inside the safe set its plan trades touchdown margin for rotor margin (the
+    binding ones end equal), and its slack is that worst margin, never below the touchdown term."""
+    terminal = get_planner(uh60, PlannerSettings())
+    reach_avoid = get_planner(uh60, PlannerSettings(objective="reach_avoid"))
+    for height_ft, speed_kt in ((500, 75), (150, 60), (300, 40), (20, 100)):
+        state = initial_state_after_failure(uh60, height_ft * FT, speed_kt * KT)
+        plan, centred = terminal.plan(state), reach_avoid.plan(state)
+        assert centred.status == plan.status, (height_ft, speed_kt)
+        worst_margin = float(centred.warm_start.primal[1])
+        assert worst_margin >= centred.value - 1e-6
+        if plan.status == "safe":
+            omega0 = uh60.nominal_rotor_speed
+            assert min(centred.replay.states[2]) / omega0 > min(plan.replay.states[2]) / omega0 + 0.01
+            assert plan.value < centred.value <= 0.0
+    with pytest.raises(ConfigError, match="objective"):
+        PlannerSettings(objective="centred")

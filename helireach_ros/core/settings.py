@@ -12,9 +12,11 @@ import yaml
 from helireach_ros.core.airframe import ConfigError
 from helireach_ros.core.resources import config_path
 
-__all__ = ["METHODS", "PlannerSettings", "load_settings"]
+__all__ = ["METHODS", "OBJECTIVES", "PlannerSettings", "load_settings"]
 
 METHODS = ("flyable", "verified", "paper")
+OBJECTIVES = ("terminal", "reach_avoid")
+"""What the flyable NLP minimises (:attr:`PlannerSettings.objective`)."""
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,12 @@ class PlannerSettings:
         reaction_delay_s: s after the failure during which the controls stay at their pre-failure values
             (the pilot's or the automation's reaction time) before the plan takes over; the plan carries this
             segment and the replay flies it. 0 = the plan starts at the failure.
+        objective: flyable: ``"terminal"``, the paper's touchdown cost J = max(|y|/y_max, |v|/v_max) − 1 with every
+            path limit a hard constraint; or ``"reach_avoid"``, the reach-avoid value: the largest of J and the
+            normalised margins of the rotor-speed limits along the path and of the touchdown attitude (each 0 at its
+            limit, −1 at its nominal value; :mod:`~helireach_ros.core.transcription.flyable`), so a plan keeps
+            its worst margin as large as it can instead of riding the limits. The limits stay hard constraints
+            either way, so the same states are safe (value ≤ 0). Other methods: always ``"terminal"``.
         closed_form_states: verified and flyable: the distance z and the engine power P are not decision
             variables but their collocation solutions in closed form (z the quadrature of v, P the solution
             of Ṗ = −P/τ), which satisfy their collocation equations exactly; neither feeds back into the
@@ -82,11 +90,14 @@ class PlannerSettings:
     rotor_speed_replay_margin: float = 0.0
     reaction_delay_s: float = 0.0
     closed_form_states: bool = True
+    objective: str = "terminal"
 
     def __post_init__(self) -> None:
         problems = []
         if self.method not in METHODS:
             problems.append(f"method must be one of {METHODS}, got {self.method!r}")
+        if self.objective not in OBJECTIVES:
+            problems.append(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
         for name, low, high in (
             ("intervals", 1, 1000),
             ("degree", 1, 9),

@@ -802,14 +802,18 @@ def stack_slices(slices: Sequence[Envelope], climb_rates: Sequence[float], metad
 
 
 def settings_differences(stored: dict[str, Any], settings: PlannerSettings) -> list[str]:
-    """The fields where stored settings (a dict) and ``settings`` differ, as ``name: stored != given``."""
-    import dataclasses
+    """The fields where stored settings (a dict) and ``settings`` differ, as ``name: stored != given``.
 
-    given = dataclasses.asdict(settings)
+    A field the stored settings predate counts as its default: a setting is added with the behaviour before it as
+    its default, so a file computed before it exists was computed with that default.
+    """
+    from helireach_ros.core.settings import PlannerSettings
+
+    given, defaults = dataclasses.asdict(settings), dataclasses.asdict(PlannerSettings())
     return [
-        f"{name}: {stored.get(name)!r} != {given.get(name)!r}"
+        f"{name}: {stored.get(name, defaults.get(name))!r} != {given.get(name)!r}"
         for name in sorted(set(stored) | set(given))
-        if stored.get(name) != given.get(name)
+        if stored.get(name, defaults.get(name)) != given.get(name)
     ]
 
 

@@ -113,6 +113,19 @@ class FlyableTranscription(VerifiedTranscription):
             physical_states[2, :] / omega0 - touchdown_low - backoff_now - (flight_low - touchdown_low) * step
         )
         terminal_scaled = states[:, -1]
+        margins = []
+        if settings.objective == "reach_avoid":
+            flight_floor = touchdown_low + (flight_low - touchdown_low) * step  # the true floor, without back-off
+            # the ceiling the NLP holds: the true limit in the first interval, the back-off after it (bounds below)
+            ceiling_backoff = np.full(self.n_states, settings.rotor_speed_backoff)
+            ceiling_backoff[: settings.degree] = 0.0
+            margins = self._path_margins(
+                rotor_ratio=physical_states[2, :] / omega0,
+                floor=rotor_margin,
+                floor_scale=1.0 - flight_floor,
+                ceiling_backoff=ca.DM(ceiling_backoff).T,
+                touchdown_pitch=breakpoints[1, -1],
+            )
 
         scaled_controls = breakpoints / ca.repmat(control_scale, 1, intervals + 1)
         self.objective = slack + settings.smoothness_weight * self.smoothness(scaled_controls)
@@ -122,11 +135,18 @@ class FlyableTranscription(VerifiedTranscription):
             *rate_rows,
             ca.reshape(commit, -1, 1),
             ca.reshape(rotor_margin, -1, 1),
+            *[ca.reshape(margin - slack, -1, 1) for margin in margins],
         )
         n_equalities = residuals.numel()
         n_rates = 4 * intervals
-        self.lbg = np.concatenate([np.zeros(n_equalities), np.full(6 + n_rates, -np.inf), np.zeros(2 * self.n_states)])
-        self.ubg = np.concatenate([np.zeros(n_equalities + 6 + n_rates), np.full(2 * self.n_states, np.inf)])
+        n_margins = sum(margin.numel() for margin in margins)
+        self.lbg = np.concatenate([
+            np.zeros(n_equalities), np.full(6 + n_rates, -np.inf), np.zeros(2 * self.n_states),
+            np.full(n_margins, -np.inf),
+        ])  # fmt: skip
+        self.ubg = np.concatenate(
+            [np.zeros(n_equalities + 6 + n_rates), np.full(2 * self.n_states, np.inf), np.zeros(n_margins)]
+        )
 
         self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit (and back-off) is the constraint
         state_low, state_high = self.scaled_state_bounds(self.n_states, self.state_rows)
@@ -139,11 +159,39 @@ class FlyableTranscription(VerifiedTranscription):
         control_low, control_high = self.scaled_control_bounds(intervals)
         # θ(T) inside the window by a margin: the replay's contact can come a little before T, where θ is on
         # its way from the flare attitude (at 20 deg/s, 0.5 deg is 25 ms of margin).
-        margin = TOUCHDOWN_ATTITUDE_MARGIN
-        control_low[-1] = (margin - flyability.touchdown_max_nose_up_pitch) / self.control_scale[1]
-        control_high[-1] = (flyability.touchdown_max_nose_down_pitch - margin) / self.control_scale[1]
+        window_low, window_high = self._touchdown_window()
+        control_low[-1] = window_low / self.control_scale[1]
+        control_high[-1] = window_high / self.control_scale[1]
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
         self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
+
+    def _path_margins(self, *, rotor_ratio, floor, floor_scale, ceiling_backoff, touchdown_pitch) -> list:
+        """The reach-avoid value's path and touchdown margins, each 0 at its limit (as the NLP holds it, back-off
+        included) and −1 at its nominal value.
+
+        Args:
+            rotor_ratio: Ω/Ω₀ at the collocation points.
+            floor: Ω/Ω₀ minus the rotor floor the NLP holds there (≥ 0 is feasible).
+            floor_scale: 1 minus the true floor there (the margin's unit: −1 at Ω₀).
+            ceiling_backoff: the back-off of the rotor ceiling at the points (fraction of Ω₀).
+            touchdown_pitch: θ(T), rad.
+        """
+        ceiling = self.airframe.limits.max_rotor_speed_ratio
+        low, high = self._touchdown_window()
+        centre, half = 0.5 * (low + high), 0.5 * (high - low)
+        return [
+            -floor / floor_scale,
+            (rotor_ratio - (ceiling - ceiling_backoff)) / (ceiling - 1.0),
+            ca.vertcat((touchdown_pitch - centre) / half - 1.0, (centre - touchdown_pitch) / half - 1.0),
+        ]
+
+    def _touchdown_window(self) -> tuple[float, float]:
+        """θ(T) bounds the NLP holds: the touchdown window tightened by :data:`TOUCHDOWN_ATTITUDE_MARGIN`, rad."""
+        flyability = self.airframe.flyability
+        return (
+            TOUCHDOWN_ATTITUDE_MARGIN - flyability.touchdown_max_nose_up_pitch,
+            flyability.touchdown_max_nose_down_pitch - TOUCHDOWN_ATTITUDE_MARGIN,
+        )
 
     def initial_guess(self, initial_state: np.ndarray) -> np.ndarray:
         return np.clip(super().initial_guess(initial_state), self.lbx, self.ubx)
