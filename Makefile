@@ -37,7 +37,7 @@ lint: $(STAMP)
 # planner uses the plain CasADi functions, ~0.9x slower), and the block LDL^T linear solver (~1 s; a planner also
 # builds it at first use). HELIREACH_NLP_CACHE, CC, HELIREACH_NLP_CFLAGS apply.
 nlp-cache: $(STAMP)
-	$(BIN)/python -m helireach_ros.core.compiled_nlp
+	$(BIN)/helireach nlp-cache
 
 # The benches behind docs/results/: each writes docs/results/data/<bench>.json (--json), one after another (the
 # numbers are times: never two at once), then bench/results_pages.py regenerates the pages from those records.

@@ -14,12 +14,22 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "helireach_ros"
 
 
-def imported_modules(path: Path, root: Path = PACKAGE.parent) -> set[str]:
-    """Every module a file imports, absolute names (relative imports resolved against its package)."""
+def imported_modules(path: Path, root: Path = PACKAGE.parent, *, at_run_time: bool = False) -> set[str]:
+    """Every module a file imports, absolute names (relative imports resolved against its package).
+
+    ``at_run_time``: leave out the imports under ``if TYPE_CHECKING:``, which only the type checker runs.
+    """
     tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
     package = ".".join(path.relative_to(root).with_suffix("").parts[:-1])
     names: set[str] = set()
+    skipped: set[int] = set()
+    if at_run_time:
+        for node in ast.walk(tree):
+            if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+                skipped.update(id(child) for statement in node.body for child in ast.walk(statement))
     for node in ast.walk(tree):
+        if id(node) in skipped:
+            continue
         if isinstance(node, ast.Import):
             names.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -76,3 +86,66 @@ def test_the_checker_sees_lazy_and_relative_imports(tmp_path):
     assert offending("core", ("rclpy", "helireach_ros.ros"), tmp_path / "helireach_ros") == {
         "helireach_ros/core/probe.py": ["helireach_ros.ros", "helireach_ros.ros.messages", "rclpy"]
     }
+
+
+def module_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
+    """Each module of the package and the package modules it imports at run time (function-level imports too)."""
+    modules = {}
+    for path in sorted(package.rglob("*.py")):
+        parts = path.relative_to(package.parent).with_suffix("").parts
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return {
+        name: {other for other in imported_modules(path, package.parent, at_run_time=True) if other in modules} - {name}
+        for name, path in modules.items()
+    }
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(module: str) -> None:
+        index[module] = low[module] = len(index)
+        stack.append(module)
+        for other in sorted(graph[module]):
+            if other not in index:
+                visit(other)
+                low[module] = min(low[module], low[other])
+            elif other in stack:
+                low[module] = min(low[module], index[other])
+        if low[module] == index[module]:
+            component = []
+            while True:
+                other = stack.pop()
+                component.append(other)
+                if other == module:
+                    break
+            if len(component) > 1:
+                cycles.append(sorted(component))
+
+    for module in sorted(graph):
+        if module not in index:
+            visit(module)
+    return cycles
+
+
+def test_no_import_cycle_even_through_function_level_imports():
+    assert import_cycles(module_graph()) == []
+
+
+def test_the_cycle_check_finds_a_lazy_cycle_and_ignores_type_checking_imports(tmp_path):
+    core = tmp_path / "helireach_ros" / "core"
+    core.mkdir(parents=True)
+    (tmp_path / "helireach_ros" / "__init__.py").write_text("", encoding="utf-8")
+    (core / "__init__.py").write_text("", encoding="utf-8")
+    (core / "a.py").write_text("from helireach_ros.core import b\n", encoding="utf-8")
+    (core / "b.py").write_text("def f():\n    from helireach_ros.core import a\n", encoding="utf-8")
+    (core / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from helireach_ros.core import a\n", encoding="utf-8"
+    )
+    graph = module_graph(tmp_path / "helireach_ros")
+    assert import_cycles(graph) == [["helireach_ros.core.a", "helireach_ros.core.b"]]
+    assert graph["helireach_ros.core.c"] == set()

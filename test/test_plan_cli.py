@@ -121,3 +121,13 @@ def test_the_rotor_model_is_selectable_and_the_paper_method_keeps_the_papers():
     assert paper["time_to_land_s"] == pytest.approx(reference["time_to_land_s"], abs=1e-9)
     bad = _helireach("plan", "--height-ft", "300", "--speed-kt", "40", "--rotor-model", "uniform")
     assert bad.returncode == 2 and "--rotor-model" in bad.stderr
+
+
+@pytest.mark.build  # compiles the NLP's C code on a machine whose cache does not have it yet
+def test_nlp_cache_builds_the_default_and_refuses_an_unknown_airframe_with_one_line():
+    built = _helireach("nlp-cache")
+    assert built.returncode == 0, built.stderr
+    assert built.stdout.startswith("uh60a_class: ") and "linear solver" in built.stdout
+    refused = _helireach("nlp-cache", "--airframe", "no_such_airframe")
+    assert refused.returncode == 2 and refused.stdout == ""
+    assert len(refused.stderr.strip().splitlines()) == 1 and "no_such_airframe" in refused.stderr

@@ -26,6 +26,7 @@ SUBCOMMAND_MODULES = (
     "helireach_ros.cli.log",
     "helireach_ros.cli.display",
     "helireach_ros.cli.demo",
+    "helireach_ros.cli.nlp_cache",
 )
 
 

@@ -27,8 +27,6 @@ Run ``python -m helireach_ros.core.compiled_nlp`` to build the library for the d
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
 import hashlib
 import logging
 import os
@@ -255,24 +253,3 @@ def ipopt_solvers(
             log.warning("cannot load %s, using the plain functions: %s", functions.source, error)
             functions = NlpFunctions(nlp, False, f"plain CasADi functions (cannot load {functions.source})")
     return {name: ca.nlpsol(name, "ipopt", nlp, opts) for name, opts in options.items()}, functions.description
-
-
-def main(argv: list[str] | None = None) -> None:
-    """Builds the compiled library for an airframe with the default planner settings, and the block LDL^T
-    (``make nlp-cache``)."""
-    from helireach_ros.core.airframe import load_airframe
-    from helireach_ros.core.planner import LandingPlanner
-    from helireach_ros.core.settings import load_settings
-
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("--airframe", action="append", help="airframe name (repeatable; default uh60a_class)")
-    parser.add_argument("--settings", help="planner settings file (default config/planner.yaml)")
-    arguments = parser.parse_args(argv)
-    codegen = dataclasses.replace(CodegenSettings.from_environment(), mode="build")
-    for name in arguments.airframe or ["uh60a_class"]:
-        planner = LandingPlanner(load_airframe(name), load_settings(arguments.settings), codegen)
-        print(f"{name}: {planner.nlp_functions}; linear solver {planner.linear_solver}")
-
-
-if __name__ == "__main__":
-    main()

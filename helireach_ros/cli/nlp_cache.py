@@ -1,0 +1,61 @@
+"""``helireach nlp-cache``: compile the landing NLP's functions and the block LDL^T into the user cache.
+
+What ``make nlp-cache`` runs: for each airframe (default ``uh60a_class``) with the planner settings file, the NLP's
+CasADi functions are generated as C, compiled and stored under their checksum
+(:mod:`helireach_ros.core.compiled_nlp`), and so is IPOPT's linear solver (:mod:`helireach_ros.core.block_ldl`).
+Later planners of the same NLP load them; without them the planner runs the plain functions, never an error.
+Exit codes: 0 built (or already there), 2 bad input (an unknown airframe or a broken settings file).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import sys
+
+__all__ = ["main", "register"]
+
+
+def _build(arguments: argparse.Namespace) -> int:
+    from helireach_ros.core.airframe import ConfigError, load_airframe
+    from helireach_ros.core.compiled_nlp import CodegenSettings
+    from helireach_ros.core.planner import LandingPlanner
+    from helireach_ros.core.settings import load_settings
+
+    codegen = dataclasses.replace(CodegenSettings.from_environment(), mode="build")
+    try:
+        settings = load_settings(arguments.settings)
+        airframes = [load_airframe(name) for name in arguments.airframe or ["uh60a_class"]]
+    except (ConfigError, FileNotFoundError) as error:
+        print(f"helireach nlp-cache: {error}", file=sys.stderr)
+        return 2
+    for airframe in airframes:
+        planner = LandingPlanner(airframe, settings, codegen)
+        print(f"{airframe.name}: {planner.nlp_functions}; linear solver {planner.linear_solver}")
+    return 0
+
+
+def _add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--airframe", action="append", help="airframe name (repeatable; default uh60a_class)")
+    parser.add_argument("--settings", help="planner settings file (default config/planner.yaml)")
+    parser.set_defaults(handler=_build)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Adds ``nlp-cache``."""
+    parser = subparsers.add_parser(
+        "nlp-cache", help="compile the NLP functions and the linear solver into the user cache (make nlp-cache)"
+    )
+    _add_arguments(parser)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m helireach_ros.cli.nlp_cache`` (the same as ``helireach nlp-cache``)."""
+    parser = argparse.ArgumentParser(prog="helireach nlp-cache", description=__doc__.splitlines()[0])
+    _add_arguments(parser)
+    arguments = parser.parse_args(argv)
+    return arguments.handler(arguments)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
