@@ -22,7 +22,7 @@ Modes (:class:`CodegenSettings`, from the environment by default):
 - ``off``: always the plain functions.
 
 Building happens only where a planner is constructed (start-up), never inside a solve.
-Run ``python -m helireach_ros.core.compiled_nlp`` to build the library for the default airframe and settings.
+Run ``helireach nlp-cache`` (``make nlp-cache``) to build the library for the default airframe and settings.
 """
 
 from __future__ import annotations
