@@ -914,11 +914,12 @@ def save_envelope(envelope: Envelope, path: str | os.PathLike[str]) -> Path:
     """
     if envelope.complete and envelope.format_version == FORMAT_VERSION_ANSWERS:
         envelope = envelope.answers()
-        if envelope.solver_state is not None:
-            try:
-                _write_npz(solver_state_path(envelope.checksum), _solver_state_payload(envelope))
+        cached = solver_state_path(envelope.checksum)
+        if envelope.solver_state is not None and _cached_solver_state(envelope.checksum) is None:
+            try:  # the same checksum is the same content: a valid cache file is not written again
+                _write_npz(cached, _solver_state_payload(envelope))
             except OSError as error:
-                log.warning("could not cache the envelope's solver state: %s", error)
+                log.warning("could not cache the envelope's solver state in %s: %s", cached, error)
     arrays = envelope.arrays
     payload = {name: np.ascontiguousarray(array) for name, array in arrays.items()}
     payload["metadata_json"] = np.frombuffer(envelope._metadata_json, dtype=np.uint8)
