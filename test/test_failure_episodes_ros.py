@@ -247,3 +247,33 @@ def test_a_planner_that_missed_the_event_plans_from_the_episode_and_stops_when_l
         assert len(events) == 1  # the flag still true on the ground starts nothing
     finally:
         harness.close()
+
+
+# --- after the failure, the status ages with its evidence -----------------------------------------------------
+def test_after_a_failure_a_verified_plan_is_ok_only_while_the_aircraft_is_seen_flying_it(context: Context) -> None:
+    """The vehicle stops publishing after the failure: the safety status leaves OK within about stale_timeout and
+    says the plan is not tracked; with the state back but no rotor reading it is at most WARN, saying why."""
+    monitor = VehicleMonitor(context=context)
+    planner = LandingPlannerNode(context=context, parameter_overrides=[Parameter("replan_period", value=0.0)])
+    harness = Harness(context, monitor, planner, EnvelopeStatusNode(context=context))
+    statuses = harness.listen(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS)
+    try:
+        trigger_failure(harness, HEIGHT, SPEED)
+        verified = lambda: bool(statuses) and statuses[-1].message.startswith("ENGINE FAILURE: ") and (  # noqa: E731
+            statuses[-1].level == DiagnosticStatus.OK
+        )
+        assert harness.keep_publishing(HEIGHT, SPEED, until=verified), statuses[-1].message
+        silent_since = time.monotonic()
+        assert harness.spin_until(level_is(statuses, DiagnosticStatus.STALE), timeout_s=3.0)
+        assert time.monotonic() - silent_since < 0.5 + 0.5 + 0.3  # stale_timeout + publish_period + slack
+        assert "NOT TRACKED" in statuses[-1].message and "verified" in statuses[-1].message
+        assert rm.status_values(statuses[-1])["episode"] == "failed"
+
+        def odometry_only(_: float) -> None:
+            harness.odometry.publish(rm.odometry_message(harness.now_ns(), HEIGHT, 0.0, SPEED, 0.0))
+
+        run_for(harness, 1.5, odometry_only, 0.02)
+        assert statuses[-1].level == DiagnosticStatus.WARN
+        assert "rotor speed not measured" in statuses[-1].message
+    finally:
+        harness.close()

@@ -169,3 +169,20 @@ def test_a_robust_verdict_says_so_and_a_node_safe_only_nominally_is_caution() ->
     assert fallback.level == "OK" and fallback.message.startswith("SAFE: margin")
     assert fallback.values["envelope_verdict"] == "nominal"
     assert fallback.values["envelope_verdict_note"] == "the envelope has no robust verdict"
+
+
+def test_after_a_failure_the_plan_ages_with_the_state_and_the_rotor_reading() -> None:
+    verified = PlanEvidence("safe", True, time_to_land_s=9.9)
+    untracked = decide(
+        envelope=None, live=None, episode="failed", plan=verified, state_problem="vehicle state 0.8 s old"
+    )
+    assert untracked.level == "STALE" and "NOT TRACKED: vehicle state 0.8 s old" in untracked.message
+    no_rotor = decide(envelope=None, live=None, episode="failed", plan=verified, rotor_measured=False)
+    assert no_rotor.level == "WARN" and "rotor speed not measured" in no_rotor.message
+    late = decide(envelope=None, live=None, episode="failed", plan=PlanEvidence("safe", True, late=True),
+                  rotor_measured=False)  # fmt: skip
+    assert late.level == "WARN" and "LATE" in late.message
+    fallback = decide(envelope=None, live=None, episode="failed", plan=PlanEvidence("fallback", False),
+                      state_problem="no vehicle state received")  # fmt: skip
+    assert fallback.level == "STALE" and fallback.message.startswith("ENGINE FAILURE: FALLBACK")
+    assert decide(envelope=None, live=None, episode="failed", plan=verified).level == "OK"

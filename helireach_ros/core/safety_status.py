@@ -35,7 +35,9 @@ failed, solver error).
 
 After a failure (episode ``failed``) the status is the current plan's: OK for a replay-verified plan
 (standby or refined; WARN when it was made late), ERROR for a fallback (never verified), an unverified or
-unsafe plan, or no plan yet.
+unsafe plan, or no plan yet. The plan's word ages with the evidence that the aircraft is flying it, by the rules
+before a failure: without a valid, fresh state a verified plan is STALE (nobody knows whether it is being tracked),
+and without a fresh rotor-speed reading it is at most WARN (it is safe only if the rotor is where it planned).
 ``landed``: STALE (the envelope does not apply on the ground). ``ended`` (engine recovered): the rules
 before a failure apply again.
 
@@ -178,7 +180,17 @@ def _live_level(evidence: LiveEvidence, live_warn_value: float) -> tuple[str, st
     return "ERROR", f"AVOID (live): safe landing not proven, {evidence.status}"
 
 
-def _after_failure(plan: PlanEvidence | None) -> tuple[str, str, str]:
+def _after_failure(plan: PlanEvidence | None, state_problem: str, rotor_measured: bool) -> tuple[str, str, str]:
+    level, text, source = _plan_level(plan)
+    if state_problem:
+        level, text = more_conservative(level, "STALE"), f"{text}; NOT TRACKED: {state_problem}"
+    elif not rotor_measured:
+        level = more_conservative(level, "WARN")
+        text = f"{text}; rotor speed not measured: safe only if it is nominal"
+    return level, text, source
+
+
+def _plan_level(plan: PlanEvidence | None) -> tuple[str, str, str]:
     if plan is None:
         return "ERROR", "ENGINE FAILURE: no landing plan yet", "plan"
     if plan.verified and plan.status == "safe":
@@ -204,6 +216,7 @@ def decide_safety_status(
     input_problems: Sequence[str] = (),
     warn_margin: float = 20.0,
     live_warn_value: float = -0.1,
+    rotor_measured: bool = True,
 ) -> SafetyDecision:
     """The safety status from every piece of evidence (the rules are in the module docstring).
 
@@ -218,10 +231,12 @@ def decide_safety_status(
         input_problems: inputs with incompatible QoS (each makes the status ERROR).
         warn_margin: envelope WARN margin, ft/kt.
         live_warn_value: live WARN above this J.
+        rotor_measured: a fresh rotor-speed reading exists (before a failure the envelope's domain check says the
+            same; after it, a plan is then at most WARN).
     """
     values: dict[str, Any] = {"episode": episode}
     if episode == "failed":
-        level, text, source = _after_failure(plan)
+        level, text, source = _after_failure(plan, state_problem, rotor_measured)
     elif episode == "landed":
         level, text, source = "STALE", "LANDED: the envelope does not apply on the ground", "none"
     elif state_problem:

@@ -168,6 +168,7 @@ def evaluate_safety(
         input_problems=input_problems,
         warn_margin=warn_margin,
         live_warn_value=live_warn_value,
+        rotor_measured=rotor_speed is not None,
     )
     return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[decision.level], decision.message, {**values, **decision.values})
 
