@@ -132,6 +132,8 @@ def test_start_skips_into_the_log_keeping_the_latched_status(
     assert len(odometry) == 3 and odometry == sorted(odometry)
     with pytest.raises(ValueError, match="start"):
         replay_log(log, node=player, context=context, start_s=-1.0)
+    with pytest.raises(ValueError, match=r"start 1 s is past the end of .* \(its messages span 0\.\d+ s\)"):
+        replay_log(log, node=player, context=context, start_s=1.0)  # nothing would be replayed: say so
 
 
 def test_loops_play_the_log_again(context: Context, listener: Listener, tmp_path: Path) -> None:

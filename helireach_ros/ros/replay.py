@@ -31,7 +31,13 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING
 
-from helireach_ros.core.mcap_log import LoggedMessage, LoggedTopic, McapLogError, read_log, read_log_topics
+from helireach_ros.core.mcap_log import (
+    LoggedMessage,
+    LoggedTopic,
+    McapLogError,
+    read_log,
+    read_log_overview,
+)
 
 if TYPE_CHECKING:
     from rclpy.context import Context
@@ -123,7 +129,12 @@ def check_playback(
         raise ValueError(f"rate must be a finite factor >= 0 (0 = as fast as possible), not {rate}")
     if not math.isfinite(start_s) or start_s < 0.0:
         raise ValueError(f"start must be finite seconds >= 0, not {start_s}")
-    logged = read_log_topics(path, allow_truncated=allow_truncated)
+    logged, span_ns = read_log_overview(path, allow_truncated=allow_truncated)
+    length_s = 0.0 if span_ns is None else (span_ns[1] - span_ns[0]) * 1e-9
+    if start_s > length_s:
+        raise ValueError(
+            f"start {start_s:g} s is past the end of {os.fspath(path)} (its messages span {length_s:.3f} s)"
+        )
     missing = sorted(set(topics or ()) - set(logged))
     if missing:
         raise ValueError(

@@ -22,7 +22,7 @@ from helireach_ros.core.mcap_log.records import (
     QosDescription,
 )
 
-__all__ = ["read_log", "read_log_metadata", "read_log_topics"]
+__all__ = ["LogOverview", "read_log", "read_log_metadata", "read_log_overview", "read_log_topics"]
 
 
 def _has_footer(stream: BinaryIO) -> bool:
@@ -208,13 +208,38 @@ def read_log_topics(path: str | os.PathLike[str], *, allow_truncated: bool = Fal
     Raises:
         McapLogError: The file is missing, not MCAP, truncated or corrupt.
     """
-    log_path = Path(path)
+    return _read_overview(Path(path), allow_truncated).topics
+
+
+class LogOverview(NamedTuple):
+    """What a log holds, without its messages.
+
+    Attributes:
+        topics: per topic: type, offered QoS, message count.
+        span_ns: log times of the first and last message, ns (None for a log without messages).
+    """
+
+    topics: dict[str, LoggedTopic]
+    span_ns: tuple[int, int] | None
+
+
+def read_log_overview(path: str | os.PathLike[str], *, allow_truncated: bool = False) -> LogOverview:
+    """The topics and the message time span of a log; args and raises as :func:`read_log_topics`."""
+    return _read_overview(Path(path), allow_truncated)
+
+
+def _read_overview(log_path: Path, allow_truncated: bool) -> LogOverview:
+    """The topics and the message time span, from the summary or (a truncated file) by scanning the records."""
     with _open_log(log_path) as stream:
         reader = _open_summary(log_path, stream, allow_truncated)
+        span: tuple[int, int] | None = None
         if reader is not None:
             summary = reader.get_summary()
             assert summary is not None  # _open_summary returns a reader only when there is one
-            counts = summary.statistics.channel_message_counts if summary.statistics else {}
+            statistics = summary.statistics
+            counts = statistics.channel_message_counts if statistics else {}
+            if statistics and statistics.message_count:
+                span = (statistics.message_start_time, statistics.message_end_time)
             schemas = summary.schemas
             channels = summary.channels.values()
         else:
@@ -226,9 +251,11 @@ def read_log_topics(path: str | os.PathLike[str], *, allow_truncated: bool = Fal
                     channel_list.append(record)
                 elif isinstance(record, Message):
                     counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
+                    first, last = span or (record.log_time, record.log_time)
+                    span = (min(first, record.log_time), max(last, record.log_time))
             channels = channel_list
         topics: dict[str, LoggedTopic] = {}
         for channel in channels:
             info = _channel_info(log_path, channel, schemas.get(channel.schema_id))
             topics[info.topic] = LoggedTopic(info.type_name, info.qos, counts.get(channel.id, 0))
-    return topics
+    return LogOverview(topics, span)
