@@ -160,3 +160,21 @@ def test_the_3d_file_answers_at_the_climb_rate_and_not_beyond_its_axis(shipped_3
     assert shipped_3d.query(200 * FT, 5 * KT, climb_rate=-700 * FPM).status == "unsafe"
     assert shipped_3d.query(700 * FT, 100 * KT, climb_rate=-2500 * FPM).status == "outside"
     assert shipped_3d.query(700 * FT, 100 * KT, climb_rate=2000 * FPM).status == "outside"
+
+
+@pytest.mark.slow  # ~4,800 replays
+def test_every_safe_nodes_stored_plan_lands_as_stored(shipped_3d):
+    """A safe node rests on the plan the file holds: its control function, as stored (float32), flown from the
+    node's state through the independent replay, lands within every limit."""
+    from helireach_ros.core.verification import replay_controls
+
+    airframe, settings = load_airframe("uh60a_class"), load_settings()
+    initial_states = shipped_3d.arrays["plan_initial_state"]
+    failing = []
+    for node in np.argwhere(shipped_3d.status == "safe"):
+        climb_index, row, column = (int(i) for i in node)
+        stored = shipped_3d.stored_plan(row, column, climb_index)  # control times, values, interpolation, T
+        replay = replay_controls(airframe, settings, initial_states[climb_index, row, column], stored)
+        if not replay.lands_within_limits:
+            failing.append(((climb_index, row, column), replay.value))
+    assert failing == []

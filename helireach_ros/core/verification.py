@@ -45,6 +45,7 @@ __all__ = [
     "ReplaySummary",
     "control_function",
     "not_replayed",
+    "replay_controls",
     "replay_plan",
     "segment_integrator",
     "segment_parameters",
@@ -201,6 +202,30 @@ def _flown_controls(plan: DecodedPlan, end_time: float) -> tuple[np.ndarray, np.
         count = len(inside)
         return times, plan.control_values[:, : max(count, 1)]
     return times, control_function(plan.control_times, plan.control_values, "linear", times)
+
+
+def replay_controls(
+    airframe: Airframe,
+    settings: PlannerSettings,
+    initial_state: np.ndarray,
+    plan: object,
+    disturbance: np.ndarray | None = None,
+) -> ReplaySummary:
+    """:func:`replay_plan` for a control function alone (a stored plan, or a plan's rounded copy): ``plan`` has
+    ``control_times``, ``control_values``, ``control_interpolation`` and ``time_to_land``; with no NLP states to
+    compare, ``max_deviation`` is measured at the start only."""
+    start = np.asarray(initial_state, dtype=float)[:6]
+    decoded = DecodedPlan(
+        float(plan.time_to_land),  # type: ignore[attr-defined]
+        np.zeros(1),
+        start[:, None],
+        np.asarray(plan.control_times, dtype=float),  # type: ignore[attr-defined]
+        np.asarray(plan.control_values, dtype=float),  # type: ignore[attr-defined]
+        str(plan.control_interpolation),  # type: ignore[attr-defined]
+        np.zeros(1),
+        start[:, None],
+    )
+    return replay_plan(airframe, settings, start, decoded, disturbance)
 
 
 def replay_plan(

@@ -253,10 +253,12 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
     """One ``plan`` from trim on ``job.climb_rate`` at (height, speed) after the failure.
 
     A (speed, climb rate) without steady powered flight is ``no_trim`` (no solve, so not warm-started);
-    solver errors become ``failed``.
+    solver errors become ``failed``. A safe plan is replayed again as the file stores it (its control function in
+    float32); if that does not land within limits the node is ``unverified``, so every safe node's stored plan lands.
     """
     from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import DECIDED_WITHOUT_NLP, get_planner
+    from helireach_ros.core.verification import replay_controls
 
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
@@ -277,12 +279,20 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
             STATUS_CODES[plan.status], plan.value, plan.time_to_land, plan.replay.value, plan.verified, 0, 0.0, False,
             point_time_ms=1e3 * (time.perf_counter() - started), point_cpu_ms=1e3 * (time.process_time() - started_cpu),
         )  # fmt: skip
+    control_times, control_values = plan.control_times.astype(np.float32), plan.control_values.astype(np.float32)
+    status, verified, replay_value = STATUS_CODES[plan.status], plan.verified, plan.replay.value
+    if plan.status == "safe":
+        # A safe node rests on the plan the file stores: its float32 control function must land in the replay too.
+        stored = dataclasses.replace(plan, control_times=control_times, control_values=control_values)
+        replayed = replay_controls(planner.airframe, planner.settings, plan.initial_state, stored, plan.disturbance)
+        if not replayed.lands_within_limits:
+            status, verified, replay_value = STATUS_CODES["unverified"], False, replayed.value
     return _Solution(
-        status=STATUS_CODES[plan.status],
+        status=status,
         value=math.nan if failed else plan.value,
         time_to_land=plan.time_to_land,
-        replay_value=plan.replay.value,
-        verified=plan.verified,
+        replay_value=replay_value,
+        verified=verified,
         iterations=plan.solver.iterations,
         solve_time_ms=plan.solver.solve_time_ms,
         warm_started=plan.solver.warm_started,
@@ -291,8 +301,8 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
             plan.warm_start.bound_multipliers, job.settings.warm_start_bound_push
         ),
         constraint_multipliers=plan.warm_start.constraint_multipliers.astype(np.float32),
-        control_times=plan.control_times.astype(np.float32),
-        control_values=plan.control_values.astype(np.float32),
+        control_times=control_times,
+        control_values=control_values,
         control_interpolation=plan.control_interpolation,
         initial_state=np.asarray(plan.initial_state, np.float64),
         point_time_ms=1e3 * (time.perf_counter() - started),
