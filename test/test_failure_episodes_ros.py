@@ -277,3 +277,24 @@ def test_after_a_failure_a_verified_plan_is_ok_only_while_the_aircraft_is_seen_f
         assert "rotor speed not measured" in statuses[-1].message
     finally:
         harness.close()
+
+
+def test_re_planning_pauses_without_a_rotor_reading_and_says_so(context: Context) -> None:
+    harness, planner = monitor_and_planner(context, replan_period=0.1)
+    diagnostics = harness.listen(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
+    try:
+        trigger_failure(harness, HEIGHT, SPEED)
+        assert harness.keep_publishing(HEIGHT, SPEED, until=lambda: planner.published_plans != [])
+
+        def odometry_only(_: float) -> None:  # the rotor joint is gone from the vehicle's messages
+            harness.odometry.publish(rm.odometry_message(harness.now_ns(), HEIGHT, 0.0, SPEED, 0.0))
+
+        run_for(harness, 2.0, odometry_only, 0.02)
+        reports = [
+            status for array in diagnostics for status in array.status if status.name == "helireach_planner: planner"
+        ]
+        assert int(rm.status_values(reports[-1])["replans_skipped_no_rotor"]) > 0
+        assert reports[-1].level == DiagnosticStatus.WARN
+        assert "re-planning paused: no measured rotor speed" in reports[-1].message
+    finally:
+        harness.close()

@@ -408,6 +408,7 @@ class FailureEpisode:
     current: PublishedPlan | None = None
     replans: int = 0
     replans_failed: int = 0
+    replans_skipped_no_rotor: int = 0  # re-plan ticks without a measured rotor speed (the current plan was kept)
     deadline_handled: bool = False
     outcome: str = ""
     history: list[PublishedPlan] = field(default_factory=list)

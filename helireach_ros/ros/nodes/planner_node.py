@@ -916,8 +916,14 @@ class LandingPlannerNode(Node):
         if current is None:
             return
         state, stamp_ns, frame, rotor_source = current
-        if rotor_source != "measured":
-            return  # re-planning with an assumed rotor speed could be worse than the current plan
+        if rotor_source != "measured":  # re-planning from an assumed rotor speed could be worse than the current plan
+            failure.replans_skipped_no_rotor += 1
+            self.get_logger().warning(
+                f"failure #{failure.failure_id}: re-planning paused: no measured rotor speed (the current plan is "
+                f"kept; {failure.replans_skipped_no_rotor} re-plans skipped)",
+                throttle_duration_sec=1.0,
+            )
+            return
         previous = failure.current
         remaining = plan_time_remaining(previous.plan.time_to_land, (stamp_ns - previous.stamp_ns) * 1e-9)
         if replanning_ends(state[3], remaining, self._replan_min_height, self._replan_min_remaining):
@@ -1259,7 +1265,13 @@ class LandingPlannerNode(Node):
             else:
                 values["live_rate_hz"] = 0.0
         if failure is not None:
-            values.update(failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed)
+            values.update(
+                failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed,
+                replans_skipped_no_rotor=failure.replans_skipped_no_rotor,
+            )  # fmt: skip
+            current = self.current_state() if failure.active and failure.replans_skipped_no_rotor else None
+            if current is not None and current[3] != "measured":
+                problems.append("re-planning paused: no measured rotor speed (the current plan is kept)")
             values["failure_outcome"] = failure.outcome
             if failure.current is not None:
                 values["last_latency_ms"] = failure.current.latency_ms
