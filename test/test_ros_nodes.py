@@ -506,3 +506,40 @@ def test_the_status_node_refuses_an_envelope_made_for_another_weight(context: Co
         assert "no envelope" in statuses[-1].message and "W = 16800 lbf" in statuses[-1].message  # today's weight
     finally:
         harness.close()
+
+
+def test_an_implausible_airframe_is_a_warning_on_the_planners_diagnostics(context: Context, tmp_path) -> None:
+    """A unit slip the physical ranges let through (the radius in metres where the file says feet: 724 m/s tip
+    speed) is not only a warning on stderr: the planner's /diagnostics say so while it runs."""
+    import warnings
+
+    import yaml
+
+    from helireach_ros.core.airframe_plausibility import AirframePlausibilityWarning
+    from helireach_ros.core.resources import config_path
+
+    document = yaml.safe_load(config_path("airframes/uh60a_class.yaml").read_text())
+    document["parameters"]["rotor_radius"] = {"value": 26.83, "unit": "m", "source": "test: a unit slip"}
+    path = tmp_path / "uh60a_radius_in_m.yaml"
+    path.write_text(yaml.safe_dump(document))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", AirframePlausibilityWarning)
+        planner = LandingPlannerNode(
+            context=context,
+            parameter_overrides=[
+                Parameter("airframe", value=str(path)), Parameter("solver_workers", value=0),
+                Parameter("live_rate", value=0.0), Parameter("envelope_file", value="none"),
+            ],
+        )  # fmt: skip
+    harness = Harness(context, planner)
+    diagnostics = harness.listen(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
+    try:
+        planner_reports = lambda: [  # noqa: E731
+            status for array in diagnostics for status in array.status if status.name == "helireach_planner: planner"
+        ]
+        assert harness.spin_until(lambda: bool(planner_reports()))
+        report = planner_reports()[-1]
+        assert report.level == DiagnosticStatus.WARN
+        assert "implausible airframe: tip_speed = 724.4 m/s" in report.message
+    finally:
+        harness.close()

@@ -284,6 +284,7 @@ class LandingPlannerNode(Node):
         self._standby_messages: PlanMessages | None = None  # the standby's messages, built when its verdict came
 
         self.planner: Any | None = None  # the in-process LandingPlanner, or the SolverPool; None = not configured
+        self._airframe_problems: list[str] = []  # derived figures outside helicopter ranges (a unit mistake?)
         self._pool: SolverPool | None = None
         self.envelope: Any | None = None
         self._setup_error = ""
@@ -354,6 +355,7 @@ class LandingPlannerNode(Node):
         solver_workers: int,
     ) -> None:
         """Loads airframe, settings and envelope; starts the solver pool, or builds the NLP here and warms it up."""
+        from helireach_ros.core.airframe_plausibility import implausible_figures
         from helireach_ros.core.model import initial_state_after_failure
         from helireach_ros.core.planner import get_planner
         from helireach_ros.core.settings import load_settings
@@ -362,6 +364,7 @@ class LandingPlannerNode(Node):
         # Today's weight and density altitude change the model, hence the NLP and which envelope matches
         # (one made for other conditions is refused: cold starts, autorotation-entry fallback).
         self.airframe = load_aircraft()
+        self._airframe_problems = implausible_figures(self.airframe)
         self.settings = load_settings(settings_file or None)
         if math.isnan(self._reaction_delay):
             self._reaction_delay = self.settings.reaction_delay_s
@@ -1236,7 +1239,7 @@ class LandingPlannerNode(Node):
             "weight_estimate_change": weight_now.relative_change,
             "weight_estimate_reason": weight_now.reason,
         }
-        problems: list[str] = []
+        problems = [f"implausible airframe: {problem}" for problem in self._airframe_problems]
         no_worker = False
         if self._pool is not None:
             ready = self._pool.ready_workers
