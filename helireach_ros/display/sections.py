@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
@@ -18,6 +18,7 @@ from nav_msgs.msg import Path as PathMsg
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.failure_episode import EpisodeState
+from helireach_ros.core.status_values import parse_bool
 from helireach_ros.ros import messages as rm
 
 __all__ = [
@@ -38,14 +39,6 @@ __all__ = [
 ]
 
 # Keys of the DiagnosticStatus values (first match wins; the status/planner nodes own the names, see msg_docs/).
-_MARGIN_KEYS = ("margin_ft_kt", "margin")
-_ENVELOPE_ID_KEYS = ("envelope_id",)
-_PLAN_VERIFIED_KEYS = ("verified",)
-_PLAN_FALLBACK_KEYS = ("fallback", "is_fallback")
-_PLAN_SAFE_KEYS = ("safe", "status")
-_PLAN_VALUE_KEYS = ("value",)
-_PLAN_TIME_TO_LAND_KEYS = ("time_to_land_s", "time_to_land")
-_PLAN_SOLVE_TIME_KEYS = ("solve_time_ms",)
 
 #: Banner level per DiagnosticStatus level; anything else is NO DATA (never optimistic).
 BANNER_LEVELS: dict[bytes, str] = {
@@ -73,24 +66,6 @@ def finite(value: Any) -> float | None:
 
 def _finite_list(values: Iterable[Any]) -> list[float | None]:
     return [finite(value) for value in values]
-
-
-def _lookup(values: Mapping[str, str], keys: Sequence[str]) -> str | None:
-    for key in keys:
-        if key in values:
-            return values[key]
-    return None
-
-
-def _parse_bool(text: str | None) -> bool | None:
-    if text is None:
-        return None
-    lowered = text.strip().lower()
-    if lowered in ("true", "1", "yes", "safe", "verified"):
-        return True
-    if lowered in ("false", "0", "no", "unsafe", "unverified", "failed"):
-        return False
-    return None
 
 
 def _decimation(count: int) -> np.ndarray:
@@ -289,21 +264,21 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
     return {
         "level": banner_level(message.level),
         "message": str(message.message),
-        "safe": _parse_bool(_lookup(values, _PLAN_SAFE_KEYS)),
-        "verified": _parse_bool(_lookup(values, _PLAN_VERIFIED_KEYS)),
-        "fallback": _parse_bool(_lookup(values, _PLAN_FALLBACK_KEYS)),
-        "value": finite(_lookup(values, _PLAN_VALUE_KEYS)),
-        "time_to_land_s": finite(_lookup(values, _PLAN_TIME_TO_LAND_KEYS)),
-        "solve_time_ms": finite(_lookup(values, _PLAN_SOLVE_TIME_KEYS)),
+        "safe": parse_bool(values.get("safe")),
+        "verified": parse_bool(values.get("verified")),
+        "fallback": parse_bool(values.get("fallback")),
+        "value": finite(values.get("value")),
+        "time_to_land_s": finite(values.get("time_to_land_s")),
+        "solve_time_ms": finite(values.get("solve_time_ms")),
         "replan_index": finite(values.get("replan_index")),
         "status": values.get("status"),
-        "late": _parse_bool(values.get("late")),
+        "late": parse_bool(values.get("late")),
         "late_by_s": finite(values.get("late_by_s")),
         "state_delay_s": finite(values.get("state_delay_s")),
         "touchdown_descent_rate_ms": finite(values.get("predicted_touchdown_descent_rate_m_s")),
         "touchdown_forward_speed_ms": finite(values.get("predicted_touchdown_forward_speed_m_s")),
-        "standby": _parse_bool(values.get("standby")),
-        "robust": _parse_bool(values.get("robust")),  # a later plan kind: read if sent, never inferred
+        "standby": parse_bool(values.get("standby")),
+        "robust": parse_bool(values.get("robust")),  # a later plan kind: read if sent, never inferred
         "gross_weight_n": finite(values.get("gross_weight_n")),
         "density_altitude_m": finite(values.get("density_altitude_m")),
         "values": values,
@@ -324,7 +299,7 @@ def robust_verdict_section(message: DiagnosticStatus) -> dict[str, Any]:
     robust = str(values.get("robust", "")).strip().lower()
     return {
         "robust": robust if robust in _ROBUST_VALUES else None,
-        "error": _parse_bool(values.get("robust_error")) is True,
+        "error": parse_bool(values.get("robust_error")) is True,
         "failure_id": values.get("failure_id"),
         "failure_stamp_ns": values.get("failure_stamp_ns"),
         "models_flown": finite(values.get("robust_models_flown")),
@@ -363,7 +338,7 @@ def touchdown_section(message: DiagnosticStatus) -> dict[str, Any]:
     """
     values = rm.status_values(message)
     return {
-        "within_limits": _parse_bool(values.get("within_limits")),
+        "within_limits": parse_bool(values.get("within_limits")),
         "descent_rate_ms": finite(values.get("descent_rate_m_s")),
         "forward_speed_ms": finite(values.get("forward_speed_m_s")),
         "max_descent_rate_ms": finite(values.get("max_descent_rate_m_s")),
@@ -387,6 +362,6 @@ def safety_status_section(message: DiagnosticStatus) -> dict[str, Any]:
     return {
         "level": banner_level(message.level),
         "message": str(message.message),
-        "margin": finite(_lookup(values, _MARGIN_KEYS)),
-        "envelope_id": _lookup(values, _ENVELOPE_ID_KEYS),
+        "margin": finite(values.get("margin_ft_kt")),
+        "envelope_id": values.get("envelope_id"),
     }

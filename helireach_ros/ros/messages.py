@@ -38,6 +38,7 @@ from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from helireach_ros.core.simulation import piecewise_linear_controls
+from helireach_ros.core.status_values import format_value
 
 __all__ = [
     "COLLECTIVE_JOINT",
@@ -445,15 +446,6 @@ def path_message(
 
 
 # --- diagnostics --------------------------------------------------------------------------------------------
-def format_value(value: Any) -> str:
-    """A DiagnosticStatus value: floats with round-trip precision, booleans as true/false."""
-    if isinstance(value, bool | np.bool_):
-        return "true" if value else "false"
-    if isinstance(value, float | np.floating):
-        return repr(float(value))
-    return str(value)
-
-
 def plan_status_values(plan: Any) -> dict[str, Any]:
     """The ``/helireach/plan_status`` values that describe a converged plan itself (see msg_docs); the
     planner node adds its bookkeeping (warm start, re-plan index, latency, failure and state)."""

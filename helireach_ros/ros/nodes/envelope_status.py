@@ -59,6 +59,7 @@ from helireach_ros.core.envelope.data import VERDICTS
 from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.failure_episode import EpisodeState
 from helireach_ros.core.safety_status import EnvelopeEvidence, LiveEvidence, PlanEvidence, decide_safety_status
+from helireach_ros.core.status_values import parse_bool
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import ParameterError, declare_aircraft, declare_checked_parameter
@@ -180,7 +181,7 @@ def live_evidence(values: dict[str, str], now_ns: int, max_age_s: float) -> Live
         return LiveEvidence(
             status=values["status"],
             value=float(values.get("value", "nan")),
-            verified=values.get("verified") == "true",
+            verified=parse_bool(values.get("verified")) is True,
             state_age_s=state_age_s,
             current=0.0 <= state_age_s <= max_age_s,
             reason=values.get("reason", ""),
@@ -194,11 +195,11 @@ def plan_evidence(values: dict[str, str], episode_started_ns: int | None) -> Pla
     try:
         if episode_started_ns is None or int(values.get("failure_stamp_ns", "-1")) != episode_started_ns:
             return None
-        status = "fallback" if values.get("fallback") == "true" else values.get("status", "none")
+        status = "fallback" if parse_bool(values.get("fallback")) is True else values.get("status", "none")
         return PlanEvidence(
             status=status,
-            verified=values.get("safe") == "true" and values.get("verified") == "true",
-            standby=values.get("standby") == "true",
+            verified=parse_bool(values.get("safe")) is True and parse_bool(values.get("verified")) is True,
+            standby=parse_bool(values.get("standby")) is True,
             time_to_land_s=float(values.get("time_to_land_s", "nan")),
             late=float(values.get("late_by_s", "0")) > 0.0,  # a late *state* (not only after a fallback)
         )
