@@ -751,7 +751,9 @@ def test_whole_run_by_flight_phase(ros: RosHarness, browser: Browser, real_plan:
         shown = await page.phase("landed", "caution", "LANDED, the report awaited", "LANDED")
         assert shown["detail"] == "AWAITING THE TOUCHDOWN REPORT"
         shown = await page.phase("landed", "caution", "LANDED from the state", "LANDED \u00b7 WITHIN LIMITS")
-        assert "FROM STATE" in shown["detail"] and f"SINK {1.2 / FT:.1f} ft/s" in shown["detail"]
+        # the larger rates of the last state above and the contact state (1.5 m/s and 5 kt above, 1.2 and 2 below)
+        assert "FROM STATE" in shown["detail"] and f"SINK {1.5 / FT:.1f} ft/s" in shown["detail"]
+        assert "SPEED 5.0 kt" in shown["detail"]
 
         # episode 3: the engine relights: ENDED, no plan, the H-V status again
         vehicle.set(cruise, status_message(DiagnosticStatus.OK, "safe", *cruise[:2], 180.0, envelope_id))

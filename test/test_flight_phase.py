@@ -125,7 +125,8 @@ def test_touchdown_from_state_waits_for_the_report_and_needs_a_flight() -> None:
     pending = tracker.result(11.4)
     assert (pending.source, pending.within_limits) == ("pending", None)
     result = tracker.result(11.5)
-    assert (result.source, result.descent_rate, result.forward_speed, result.within_limits) == ("state", 1.0, 1.0, True)
+    # the larger rates of the last state above (2.0 m/s, 2.5 m/s) and the contact (1.0, 1.0)
+    assert (result.source, result.descent_rate, result.forward_speed, result.within_limits) == ("state", 2.0, 2.5, True)
     tracker.observe(0.0, -50.0, 50.0, 12.0)  # after the contact nothing changes
     assert tracker.result(13.0) is result
     tracker.reset()
@@ -135,6 +136,11 @@ def test_touchdown_from_state_waits_for_the_report_and_needs_a_flight() -> None:
     tracker.observe(2.0, -1.0, 1.0, 21.0)
     tracker.observe(0.0, -1.0, limits.max_forward_speed + 0.5, 21.1)
     assert tracker.result(30.0).within_limits is False
+    # a vehicle that zeroes its rates on the ground: the crash is not shown as a soft landing
+    crash = TouchdownFromState(0.3, limits.max_descent_rate, limits.max_forward_speed, report_wait_s=0.0)
+    crash.observe(0.5, -12 * 0.3048, 3.0, 0.0)
+    crash.observe(0.0, 0.0, 0.0, 0.05)
+    assert crash.result(1.0).within_limits is False and crash.result(1.0).descent_rate == pytest.approx(12 * 0.3048)
     unknown = TouchdownFromState(0.3, None, None, report_wait_s=0.5)
     unknown.observe(1.0, -1.0, 1.0, 0.0)
     unknown.observe(0.0, -1.0, 1.0, 0.0)

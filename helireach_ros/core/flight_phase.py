@@ -23,8 +23,9 @@ a source that never arrived is not "silent" (a system without that node), except
 which the normal phase has no evidence at all.
 
 **Touchdown from the state** (:class:`TouchdownFromState`, when no ``/helireach/touchdown`` arrives): the first state
-at or below ``contact_height`` after one above it during the episode is the contact and its rates are the result (a
-display started on the ground sees no touchdown), after
+at or below ``contact_height`` after one above it during the episode is the contact, and the larger rates of it and
+of the last state above are the result (a vehicle that reports zero rates once on the ground must not make a hard
+landing look soft; a display started on the ground sees no touchdown), after
 ``report_wait_s`` (1 s; until then LANDED "awaiting the touchdown report", caution: in the demo the sampled state
 said 6.8 kt 0.2 s before the vehicle's report said 2.6 kt at h = 0). It is sampled, not the vehicle's own report, so
 a result within limits is only ``caution``.
@@ -191,6 +192,7 @@ class TouchdownFromState:
         self._result: TouchdownResult | None = None
         self._contact_s: float | None = None
         self._airborne = False
+        self._last_airborne: tuple[float, float] = (0.0, 0.0)  # (descent rate, |speed|) of the last state above
 
     def result(self, now_s: float) -> TouchdownResult | None:
         """The touchdown at time ``now_s`` (s, the clock of :meth:`observe`): None before the contact,
@@ -203,7 +205,7 @@ class TouchdownFromState:
 
     def reset(self) -> None:
         """Forgets everything (a new episode)."""
-        self._result, self._contact_s, self._airborne = None, None, False
+        self._result, self._contact_s, self._airborne, self._last_airborne = None, None, False, (0.0, 0.0)
 
     def observe(
         self, height: float | None, climb_rate: float | None, forward_speed: float | None, now_s: float
@@ -213,10 +215,14 @@ class TouchdownFromState:
             return
         if height > self._contact_height:
             self._airborne = True
+            self._last_airborne = (-float(climb_rate), abs(float(forward_speed)))
             return
         if not self._airborne:  # on the ground since the first state seen: no touchdown was observed
             return
-        descent, speed = -float(climb_rate), abs(float(forward_speed))
+        # The rates the aircraft met the ground with lie between the last state above and the first on the ground;
+        # a vehicle that zeroes its rates on the ground must not make a hard landing look soft: the larger of the two.
+        descent = max(-float(climb_rate), self._last_airborne[0])
+        speed = max(abs(float(forward_speed)), self._last_airborne[1])
         max_descent, max_speed = self._limits
         within = None if max_descent is None or max_speed is None else descent <= max_descent and speed <= max_speed
         self._result = TouchdownResult("state", within, descent, speed, max_descent, max_speed)
