@@ -39,6 +39,7 @@ from helireach_ros.core.mcap_log import (
     McapLogError,
     McapLogWriter,
     is_finished_log,
+    log_damage,
     read_log,
     read_log_metadata,
     recover_log,
@@ -166,6 +167,56 @@ def test_recovery_reports_a_chunk_cut_in_the_middle(tmp_path: Path) -> None:
     start, end = report.dropped_span_ns
     assert report.end_ns < start <= end <= written[-1][2]
     assert "incomplete record of 100 bytes" in report.describe()
+
+
+def damaged_finished_log(tmp_path: Path) -> tuple[Path, list[tuple[str, bytes, int]], tuple[int, int]]:
+    """A finished (closed) log with 8 bytes overwritten inside its second chunk; returns it, what was written and
+    the log-time span of the damaged chunk (from the summary's chunk index, read before the damage)."""
+    path = tmp_path / "finished.mcap"
+    cdr = serialize_message(Bool(data=True))
+    t0 = 1_700_000_000_000_000_000
+    written = [(FLAG, cdr, t0 + i * 10_000_000) for i in range(70)]
+    with McapLogWriter(path, metadata={"airframe": "uh60a_class"}, chunk_size=1024, max_chunk_age=None) as writer:
+        writer.add_topic(FLAG, "std_msgs/msg/Bool", VOLATILE)
+        for topic, data, stamp in written:
+            writer.write(topic, data, stamp)
+    data = bytearray(path.read_bytes())
+    offset, chunks = 8, []
+    while offset < len(data) and data[offset] != 0x0F:  # the data section's records, up to DataEnd
+        if data[offset] == 0x06:
+            chunks.append(offset)
+        offset += 9 + int.from_bytes(data[offset + 1 : offset + 9], "little")
+    with open(path, "rb") as stream:
+        index = next(i for i in make_reader(stream).get_summary().chunk_indexes if i.chunk_start_offset == chunks[1])
+    lost_span = (index.message_start_time, index.message_end_time)
+    second_length = int.from_bytes(data[chunks[1] + 1 : chunks[1] + 9], "little")
+    middle = chunks[1] + 9 + second_length // 2
+    data[middle : middle + 8] = bytes(8) if data[middle : middle + 8] != bytes(8) else b"\xff" * 8
+    path.write_bytes(bytes(data))
+    assert len(chunks) >= 3
+    return path, written, lost_span
+
+
+def test_a_finished_log_with_a_damaged_chunk_is_salvaged_and_never_read_in_part_silently(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    damaged, written, (lost_start, lost_end) = damaged_finished_log(tmp_path)
+    assert is_finished_log(damaged)
+    damage = log_damage(damaged)
+    assert len(damage) == 1 and "damaged chunk" in damage[0] and FLAG in damage[0] and "messages from" in damage[0]
+    with pytest.raises(McapLogError, match=r"damaged MCAP data.*log recover"):
+        list(read_log(damaged, allow_truncated=True))  # not a silent early end
+    report = recover_log(damaged)
+    kept = [message for message in written if not lost_start <= message[2] <= lost_end]
+    assert report.damaged == tuple(damage) and 0 < report.messages == len(kept) < len(written)
+    assert indexed_messages(report.output) == kept  # every intact chunk, in order; only the damaged one is lost
+    assert f"lost: {damage[0]}" in report.describe() and not log_damage(report.output)
+    assert helireach_main(["log", "recover", str(damaged), str(tmp_path / "again.mcap")]) == 0
+    assert "damaged chunk" in capsys.readouterr().out
+    with pytest.raises(McapLogError, match="log is damaged: a damaged chunk"):
+        from helireach_ros.ros.replay import check_playback
+
+        check_playback(damaged, 1.0, None, 0.0, allow_truncated=True)
 
 
 def test_log_recover_command(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -16,11 +16,11 @@ __all__ = ["register"]
 
 
 def _recover(arguments: argparse.Namespace) -> int:
-    from helireach_ros.core.mcap_log import McapLogError, is_finished_log, recover_log
+    from helireach_ros.core.mcap_log import McapLogError, is_finished_log, log_damage, recover_log
 
     try:
-        if is_finished_log(arguments.log):
-            print(f"{arguments.log}: already finished (it has a footer and index); nothing to recover")
+        if is_finished_log(arguments.log) and not log_damage(arguments.log):
+            print(f"{arguments.log}: already finished (it has a footer and index) and intact; nothing to recover")
             return 0
         report = recover_log(arguments.log, arguments.out, overwrite=arguments.force)
     except McapLogError as error:

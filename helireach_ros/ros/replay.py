@@ -35,6 +35,8 @@ from helireach_ros.core.mcap_log import (
     LoggedMessage,
     LoggedTopic,
     McapLogError,
+    is_finished_log,
+    log_damage,
     read_log,
     read_log_overview,
 )
@@ -130,6 +132,11 @@ def check_playback(
     if not math.isfinite(start_s) or start_s < 0.0:
         raise ValueError(f"start must be finite seconds >= 0, not {start_s}")
     logged, span_ns = read_log_overview(path, allow_truncated=allow_truncated)
+    if is_finished_log(path) and (damage := log_damage(path)):  # never play part of a log without saying so
+        more = f" and {len(damage) - 1} more" if len(damage) > 1 else ""
+        raise McapLogError(
+            f"log is damaged: {damage[0]}{more}; 'helireach log recover' salvages the intact records", path
+        )
     length_s = 0.0 if span_ns is None else (span_ns[1] - span_ns[0]) * 1e-9
     if start_s > length_s:
         raise ValueError(

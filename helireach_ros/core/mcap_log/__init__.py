@@ -13,7 +13,13 @@ from helireach_ros.core.mcap_log.reader import (
     read_log_topics,
 )
 from helireach_ros.core.mcap_log.records import LoggedMessage, LoggedTopic, McapLogError, QosDescription
-from helireach_ros.core.mcap_log.recover import RecoveryReport, default_recovered_path, is_finished_log, recover_log
+from helireach_ros.core.mcap_log.recover import (
+    RecoveryReport,
+    default_recovered_path,
+    is_finished_log,
+    log_damage,
+    recover_log,
+)
 from helireach_ros.core.mcap_log.schemas import message_definition, type_description_hash
 from helireach_ros.core.mcap_log.writer import McapLogWriter
 
@@ -27,6 +33,7 @@ __all__ = [
     "RecoveryReport",
     "default_recovered_path",
     "is_finished_log",
+    "log_damage",
     "message_definition",
     "read_log",
     "read_log_metadata",

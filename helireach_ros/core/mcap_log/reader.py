@@ -104,7 +104,9 @@ def read_log(path: str | os.PathLike[str], *, allow_truncated: bool = False) -> 
         path: The ``.mcap`` file.
         allow_truncated: Read a file that was never closed (e.g. the recorder was killed) by
             scanning it from the start: every completed chunk is returned, the incomplete tail is
-            dropped. Damage inside a finished file ends the iteration early instead of raising.
+            dropped. Damage inside a finished file raises either way (it is not a file that was never closed:
+            :func:`~helireach_ros.core.mcap_log.recover.recover_log` salvages its intact records and says what
+            was lost).
 
     Returns:
         An iterator of :class:`LoggedMessage`.
@@ -135,10 +137,12 @@ def _iter_indexed(
                 item = next(messages)
             except StopIteration:
                 return
-            except Exception as exc:
-                if allow_truncated:
-                    return
-                raise McapLogError(f"corrupt MCAP data ({exc.__class__.__name__}: {exc})", path) from exc
+            except Exception as exc:  # a finished file: damage, never a tail cut by a kill
+                raise McapLogError(
+                    f"damaged MCAP data ({exc.__class__.__name__}: {exc}); 'helireach log recover' salvages the "
+                    "intact records and lists what was lost",
+                    path,
+                ) from exc
             schema, channel, message = item
             info = channels.get(channel.id)
             if info is None:
