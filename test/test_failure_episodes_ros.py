@@ -245,6 +245,11 @@ def test_a_planner_that_missed_the_event_plans_from_the_episode_and_stops_when_l
         assert not planner.failure_active
         assert planner.published_plans and {record.failure_id for record in planner.published_plans} == {1}
         assert len(events) == 1  # the flag still true on the ground starts nothing
+        # the latched plan status says the episode is over, not the last plan's verdict (a late joiner reads it)
+        assert harness.spin_until(lambda: rm.status_values(plan_statuses[-1])["status"] == "landed")
+        landed = plan_statuses[-1]
+        assert landed.level == DiagnosticStatus.WARN and landed.message.startswith("LANDED: planning stopped")
+        assert rm.status_values(landed)["safe"] == "false" and rm.status_values(landed)["failure_id"] == "1"
     finally:
         harness.close()
 

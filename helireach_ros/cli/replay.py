@@ -30,10 +30,11 @@ def _run_replay(arguments: argparse.Namespace) -> int:
 
 def _run_compare(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.mcap_log import McapLogError
-    from helireach_ros.ros.plan_comparison import compare_logged_plans
+    from helireach_ros.ros.plan_comparison import compare_logged_plans, logged_plan_counts
 
     try:
         comparisons = compare_logged_plans(arguments.log)
+        counts = logged_plan_counts(arguments.log)
     except (McapLogError, ValueError, OSError) as error:
         print(f"helireach replay --compare: {error}", file=sys.stderr)
         return 1
@@ -50,7 +51,12 @@ def _run_compare(arguments: argparse.Namespace) -> int:
             f"{'reproduced' if comparison.reproduced else 'DIFFERENT'}"
         )
     reproduced = sum(comparison.reproduced for comparison in comparisons)
-    print(f"{reproduced} of {len(comparisons)} logged plans reproduced")
+    skipped = ", ".join(
+        f"{counts[kind]} {label}" for kind, label in (("standby", "standby"), ("replan", "re-plans"),
+                                                        ("fallback", "fallbacks")) if counts.get(kind)
+    )  # fmt: skip
+    not_compared = f" (each failure's first refined plan; not compared: {skipped})" if skipped else ""
+    print(f"{reproduced} of {len(comparisons)} logged plans reproduced{not_compared}")
     return 0 if reproduced == len(comparisons) else 1
 
 

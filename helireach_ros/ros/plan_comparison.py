@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PlanComparison", "compare_logged_plans"]
+__all__ = ["PlanComparison", "compare_logged_plans", "logged_plan_counts", "plan_kind"]
 
 _STATE_KEYS = (
     "initial_descent_rate_m_s",
@@ -70,16 +70,43 @@ def _logged_plans(path: Path) -> tuple[list[tuple[dict[str, str], Any]], dict[st
     for message in read_log(path):
         if message.topic == rm.TOPIC_PLAN_STATUS:
             values = rm.status_values(deserialize_message(message.cdr, DiagnosticStatus))
-            converged = values.get("status") in ("safe", "unsafe", "unverified") and values.get("fallback") == "false"
-            # A standby plan was made before the failure from a live state, warm-started along the live chain
-            # (not in the log): the first plan *of the failure* is the refined one that follows it.
-            if converged and values.get("replan_index") == "0" and values.get("standby") != "true":
+            if plan_kind(values) == "first":
                 statuses.append(values)
         elif message.topic == rm.TOPIC_LANDING_TRAJECTORY:
             trajectory = deserialize_message(message.cdr, JointTrajectory)
             trajectories[rm.stamp_nanoseconds(trajectory.header.stamp)] = trajectory
     pairs = [(values, trajectories.get(int(values["state_stamp_ns"]))) for values in statuses]
     return pairs, read_log_metadata(path)
+
+
+def plan_kind(values: dict[str, str]) -> str:
+    """What a logged plan status is: ``first`` (a failure's first converged plan: what ``--compare`` re-runs),
+    ``standby``, ``replan``, ``fallback``, or ``other`` (no plan yet, ended, landed)."""
+    if values.get("fallback") == "true":
+        return "fallback"
+    if values.get("fallback") != "false" or values.get("status") not in ("safe", "unsafe", "unverified"):
+        return "other"
+    # A standby plan was made before the failure from a live state, warm-started along the live chain (not in the
+    # log): the first plan *of the failure* is the refined one that follows it.
+    if values.get("standby") == "true":
+        return "standby"
+    return "first" if values.get("replan_index") == "0" else "replan"
+
+
+def logged_plan_counts(path: str | Path) -> dict[str, int]:
+    """How many plan statuses of each :func:`plan_kind` a log holds (what ``--compare`` did and did not re-run)."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.serialization import deserialize_message
+
+    from helireach_ros.core.mcap_log import read_log
+    from helireach_ros.ros import messages as rm
+
+    counts: dict[str, int] = {}
+    for message in read_log(path):
+        if message.topic == rm.TOPIC_PLAN_STATUS:
+            kind = plan_kind(rm.status_values(deserialize_message(message.cdr, DiagnosticStatus)))
+            counts[kind] = counts.get(kind, 0) + 1
+    return counts
 
 
 def _controls_on_grid(times: np.ndarray, values: np.ndarray, grid: np.ndarray) -> np.ndarray:

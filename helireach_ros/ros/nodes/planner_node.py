@@ -595,33 +595,34 @@ class LandingPlannerNode(Node):
         fast_logging.warning(self.get_logger(), f"engine failure #{failure.failure_id}: planning the landing")
 
     def _stop_failure(self, failure: FailureEpisode, outcome: EpisodePhase, state: EpisodeState) -> None:
-        """Stops planning for ``failure``; on ENDED the plan status says so (the last plan no longer applies)."""
+        """Stops planning for ``failure``; the plan status says so (the last plan no longer applies), so a late
+        joiner's latched status is not the last plan of an episode that is over."""
         with self._publish_lock:
             if failure is not self._failure or not failure.stop(outcome):
                 return
-            if outcome is EpisodePhase.ENDED:
-                values = {
-                    "status": "ended",
-                    "safe": False,
-                    "verified": False,
-                    "fallback": False,
-                    "reason": "engine recovered: the failure flag stayed false for the recovery hold",
-                    "failure_id": failure.failure_id,
-                    "failure_stamp_ns": failure.event_stamp_ns,
-                    "ended_stamp_ns": state.ended_ns if state.ended_ns is not None else self._now_ns(),
-                    "episode_id": state.episode_id,
-                    "plans_published": len(failure.history),
-                    "replans": failure.replans,
-                }
-                self._status_publisher.publish(
-                    rm.diagnostic_status(
-                        DiagnosticStatus.WARN,
-                        f"{self.get_name()}: landing plan",
-                        "ENDED (engine recovered): no landing plan; the last trajectory no longer applies",
-                        self.airframe.name if self.planner is not None else "helireach",
-                        values,
-                    )
+            status, reason, text = _EPISODE_END_STATUS[outcome]
+            values = {
+                "status": status,
+                "safe": False,
+                "verified": False,
+                "fallback": False,
+                "reason": reason,
+                "failure_id": failure.failure_id,
+                "failure_stamp_ns": failure.event_stamp_ns,
+                "ended_stamp_ns": state.ended_ns if state.ended_ns is not None else self._now_ns(),
+                "episode_id": state.episode_id,
+                "plans_published": len(failure.history),
+                "replans": failure.replans,
+            }
+            self._status_publisher.publish(
+                rm.diagnostic_status(
+                    DiagnosticStatus.WARN,
+                    f"{self.get_name()}: landing plan",
+                    text,
+                    self.airframe.name if self.planner is not None else "helireach",
+                    values,
                 )
+            )
         self._pause_live()  # forget the verdicts from before and during the episode; evaluation resumes afresh
         fast_logging.warning(
             self.get_logger(),
@@ -1285,6 +1286,21 @@ class LandingPlannerNode(Node):
         )
         status = rm.diagnostic_status(level, f"{self.get_name()}: planner", text, self.airframe.name, values)
         self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
+
+
+_EPISODE_END_STATUS = {
+    EpisodePhase.ENDED: (
+        "ended",
+        "engine recovered: the failure flag stayed false for the recovery hold",
+        "ENDED (engine recovered): no landing plan; the last trajectory no longer applies",
+    ),
+    EpisodePhase.LANDED: (
+        "landed",
+        "on the ground: the monitor saw the aircraft landed",
+        "LANDED: planning stopped; the last trajectory no longer applies",
+    ),
+}
+"""Plan status, reason and message once an episode is over, per outcome."""
 
 
 def _controls_from_stamp(plan: Any, stamp_ns: int) -> Callable[[float], np.ndarray]:
