@@ -136,6 +136,23 @@ def test_start_skips_into_the_log_keeping_the_latched_status(
         replay_log(log, node=player, context=context, start_s=1.0)  # nothing would be replayed: say so
 
 
+def test_a_replay_reports_its_progress(context: Context, listener: Listener, tmp_path: Path) -> None:
+    log = tmp_path / "flight.mcap"
+    write_log(log)
+    player = Node("player", context=context)
+    reports: list[tuple[int, float]] = []
+    try:
+        count = replay_log(
+            log, rate=0, node=player, context=context, on_progress=lambda *report: reports.append(report),
+            progress_interval_s=0.0,
+        )  # fmt: skip
+    finally:
+        player.destroy_node()
+    assert len(reports) == count and [n for n, _ in reports] == list(range(1, count + 1))
+    log_times = [log_s for _, log_s in reports]
+    assert log_times == sorted(log_times) and log_times[0] >= 0.0
+
+
 def test_loops_play_the_log_again(context: Context, listener: Listener, tmp_path: Path) -> None:
     log = tmp_path / "flight.mcap"
     written = write_log(log)

@@ -29,6 +29,7 @@ import os
 import sys
 import time
 from collections.abc import Callable, Iterable, Sequence
+from functools import partial
 from typing import TYPE_CHECKING
 
 from helireach_ros.core.mcap_log import (
@@ -49,6 +50,7 @@ if TYPE_CHECKING:
 __all__ = [
     "CLOCK_TOPIC",
     "DISCOVERY_WAIT_S",
+    "PROGRESS_INTERVAL_S",
     "add_playback_arguments",
     "check_playback",
     "main",
@@ -58,6 +60,8 @@ __all__ = [
 
 CLOCK_TOPIC = "/clock"
 DISCOVERY_WAIT_S = 0.5
+PROGRESS_INTERVAL_S = 5.0
+"""s of wall time between the progress lines of a replay."""
 """Longest wait for subscribers before the first message (ends early when every topic has one)."""
 _MATCH_POLL_S = 0.01
 _ACK_TIMEOUT_S = 1.0
@@ -118,6 +122,10 @@ def add_playback_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _print_progress(log: str, count: int, log_s: float) -> None:
+    print(f"replaying {log}: {count} messages, {log_s:.1f} s of log", flush=True)
+
+
 def check_playback(
     path: str | os.PathLike[str], rate: float, topics: Sequence[str] | None, start_s: float, allow_truncated: bool
 ) -> dict[str, LoggedTopic]:
@@ -169,6 +177,8 @@ def replay_log(
     publish_clock: bool = True,
     allow_truncated: bool = False,
     discovery_wait_s: float = DISCOVERY_WAIT_S,
+    on_progress: Callable[[int, float], None] | None = None,
+    progress_interval_s: float = PROGRESS_INTERVAL_S,
 ) -> int:
     """Republish logged messages as raw CDR with the QoS their publisher offered, and ``/clock``.
 
@@ -188,6 +198,9 @@ def replay_log(
         publish_clock: Publish ``/clock`` with the log time.
         allow_truncated: Play a file that was never closed (its complete chunks).
         discovery_wait_s: Longest wait for every topic to have a subscriber before the first message.
+        on_progress: Called with (messages published so far, log seconds played of this pass) at most every
+            ``progress_interval_s`` of wall time during playback (a long replay is not silent).
+        progress_interval_s: s of wall time between progress calls.
 
     Returns:
         The number of messages published (fewer if the context shuts down mid-replay).
@@ -232,9 +245,11 @@ def replay_log(
         _wait_for_subscribers(list(publishers.values()), discovery_wait_s)
         count, passes = 0, 0
         while node.context.ok() and (loops == 0 or passes < loops):
+            progress = _Progress(on_progress, progress_interval_s, count)
             count += _play_once(
-                read_log(path, allow_truncated=allow_truncated), publishers, publish_clock_at, rate, start_s, node
-            )
+                read_log(path, allow_truncated=allow_truncated), publishers, publish_clock_at, rate, start_s, node,
+                progress,
+            )  # fmt: skip
             passes += 1
         for publisher in publishers.values():
             if node.context.ok():
@@ -252,6 +267,7 @@ def _play_once(
     rate: float,
     start_s: float,
     node: Node,
+    progress: _Progress,
 ) -> int:
     """One pass over the log from ``start_s``; returns the messages published (until a shutdown)."""
     context = node.context
@@ -289,9 +305,23 @@ def _play_once(
                 clock_ns = message.log_time_ns
             _publish(publisher, message.cdr, context)
             count += 1
+            progress.tick(count, (message.log_time_ns - origin_ns) * 1e-9)
     except _ContextShutDownError:
         pass
     return count
+
+
+class _Progress:
+    """Calls back with (messages so far, log seconds played) at most every ``interval_s`` of wall time."""
+
+    def __init__(self, callback: Callable[[int, float], None] | None, interval_s: float, before: int) -> None:
+        self._callback, self._interval_s, self._before = callback, interval_s, before
+        self._last = time.monotonic()
+
+    def tick(self, count: int, log_s: float) -> None:
+        if self._callback is not None and time.monotonic() - self._last >= self._interval_s:
+            self._last = time.monotonic()
+            self._callback(self._before + count, log_s)
 
 
 def _wait_until(
@@ -347,6 +377,7 @@ def run_replay(options: argparse.Namespace, ros_args: Sequence[str] = (), prog: 
             loops=0 if options.loop else 1,
             allow_truncated=options.recover,
             discovery_wait_s=options.discovery_wait,
+            on_progress=partial(_print_progress, options.log),
         )
         if not rclpy.ok():  # a Ctrl-C or SIGTERM shut the context down (the way a --loop ends)
             print(f"interrupted: replayed {count} messages from {options.log}")
