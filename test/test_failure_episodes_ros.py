@@ -303,3 +303,23 @@ def test_re_planning_pauses_without_a_rotor_reading_and_says_so(context: Context
         assert "re-planning paused: no measured rotor speed" in reports[-1].message
     finally:
         harness.close()
+
+
+def test_two_flag_publishers_that_disagree_are_reported(context: Context) -> None:
+    harness = Harness(context, VehicleMonitor(context=context))
+    diagnostics = harness.listen(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
+    second = harness.nodes[0].create_publisher(Bool, rm.TOPIC_ENGINE_FAILURE, rm.EVENT_QOS)
+    try:
+        def two_voices(_: float) -> None:  # one vehicle bridge says failed, another says normal
+            harness.publish_state(HEIGHT, SPEED)
+            harness.failure.publish(Bool(data=True))
+            second.publish(Bool(data=False))
+
+        run_for(harness, 2.5, two_voices, 0.04)
+        report = monitor_reports(diagnostics)[-1]
+        values = rm.status_values(report)
+        assert values["failure_flag_publishers"] == "2" and report.level == DiagnosticStatus.WARN
+        assert f"2 publishers on {rm.TOPIC_ENGINE_FAILURE} disagree" in report.message
+        assert values["failure_episode"] == "failed"  # conservatively: the true one counts
+    finally:
+        harness.close()

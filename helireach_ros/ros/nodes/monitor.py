@@ -19,6 +19,7 @@ Run: ``python -m helireach_ros.ros.nodes.monitor`` (or the ``helireach_monitor``
 from __future__ import annotations
 
 import threading
+from collections import deque
 from functools import partial
 from typing import Any
 
@@ -45,6 +46,7 @@ from helireach_ros.ros.qos import QosWatch
 __all__ = ["VehicleMonitor", "main"]
 
 _FUTURE_TOLERANCE_S = 0.05  # clocks of two machines never agree exactly
+_RECENT_FLAGS = 256  # flag observations kept to see whether publishers disagree (1 s at up to 256 Hz)
 
 
 class VehicleMonitor(Node):
@@ -114,6 +116,7 @@ class VehicleMonitor(Node):
         # The input contract (core.input_contract): frames, then values, then stamp order, per stamped input.
         self._gates = {"odometry": InputGate(FrameContract(world_frame, body_frame)), "rotor": InputGate()}
         self._last_drop: tuple[int, str] | None = None
+        self._recent_flags: deque[tuple[int, bool]] = deque(maxlen=_RECENT_FLAGS)  # (received ns, value)
         self._qos_watch = QosWatch(self, diagnostics_period)
 
         self._state_publisher = self._qos_watch.create_publisher(Odometry, rm.TOPIC_STATE, rm.STREAM_QOS)
@@ -201,6 +204,7 @@ class VehicleMonitor(Node):
     def _on_failure_flag(self, message: Bool) -> None:
         now_ns = self._now_ns()
         with self._lock:
+            self._recent_flags.append((now_ns, bool(message.data)))
             transition = self._episodes.observe_flag(bool(message.data), now_ns)
             if transition is not None and transition.started:
                 self._counts["failure_events"] += 1
@@ -247,6 +251,7 @@ class VehicleMonitor(Node):
                 for reason in (WRONG_FRAME, OUT_OF_ORDER)
             }
             drop = self._last_drop
+            recent_flags = {value for received_ns, value in self._recent_flags if now_ns - received_ns <= 1e9}
         timeout_ns = self._stale_timeout * 1e9
         odometry_fresh = odometry_ns is not None and now_ns - odometry_ns <= timeout_ns
         rotor_fresh = rotor_ns is not None and now_ns - rotor_ns <= timeout_ns
@@ -263,6 +268,16 @@ class VehicleMonitor(Node):
             text = f"{text}; {rejection[1]}"
         if level == DiagnosticStatus.OK and drop is not None and now_ns - drop[0] <= timeout_ns:
             level, text = DiagnosticStatus.WARN, drop[1]  # the state stays valid: the older message was not used
+        flag_publishers = self.count_publishers(rm.TOPIC_ENGINE_FAILURE)
+        if flag_publishers > 1 and len(recent_flags) > 1:  # handled conservatively (a true one counts); say so
+            disagree = (
+                f"{flag_publishers} publishers on {rm.TOPIC_ENGINE_FAILURE} disagree (true and false within 1 s; a "
+                "true one starts an episode)"
+            )
+            if level == DiagnosticStatus.OK:
+                level, text = DiagnosticStatus.WARN, disagree
+            else:
+                text = f"{text}; {disagree}"
         if episode.phase is EpisodePhase.NO_FLAG:  # the state may be fine, but a failure could not be seen
             no_flag = "no engine-failure flag received"
             if level == DiagnosticStatus.OK:
@@ -273,6 +288,7 @@ class VehicleMonitor(Node):
         values.update(contract_counts)
         values["last_out_of_order"] = drop[1] if drop is not None else ""
         values["engine_failed"] = "unknown" if episode.flag is None else episode.flag
+        values["failure_flag_publishers"] = flag_publishers
         values.update(failure_episode=episode.phase.value, episode_id=episode.episode_id)
         values["state_age_s"] = (now_ns - odometry_ns) * 1e-9 if odometry_ns is not None else float("inf")
         values["rotor_age_s"] = (now_ns - rotor_ns) * 1e-9 if rotor_ns is not None else float("inf")
