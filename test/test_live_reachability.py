@@ -169,3 +169,16 @@ def test_the_previous_live_solution_warm_starts_only_a_neighbouring_state(airfra
     assert not evaluator.warm_start_applies(measured(airframe, 20, 75))  # a jump: cold or the envelope's plan
     _, warm_start = evaluator.prepare(measured(airframe, 20, 75), clock.now_ns, clock.now_ns)
     assert warm_start is None
+
+
+def test_a_clock_that_jumps_back_restarts_the_schedule_and_is_counted(airframe) -> None:
+    """A replay restarting its sim time used to pause live evaluation until the clock caught up with the last start
+    (no standby plan at a failure meanwhile)."""
+    evaluator = LiveEvaluator(LiveSettings(rate_hz=2.0))
+    state = measured(airframe, 500, 75)
+    assert evaluator.due(10_000_000_000)
+    evaluator.prepare(state, 10_000_000_000, 10_000_000_000)
+    assert not evaluator.due(10_100_000_000)  # within the period
+    assert evaluator.due(1_000_000_000) and evaluator.clock_jumps_back == 1  # back by 9 s: due at once
+    evaluator.prepare(state, 1_000_000_000, 1_000_000_000)
+    assert not evaluator.due(1_100_000_000) and evaluator.due(1_600_000_000)

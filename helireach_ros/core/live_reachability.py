@@ -171,6 +171,7 @@ class LiveEvaluator:
         self._last_started_ns: int | None = None
         self.evaluations = 0
         self.errors = 0
+        self.clock_jumps_back = 0  # times ``now`` came before the last evaluation's start (sim time restarted)
 
     @property
     def has_warm_start(self) -> bool:
@@ -186,7 +187,11 @@ class LiveEvaluator:
         return bool(np.all(change <= WARM_START_NEIGHBOURHOOD))
 
     def due(self, now_ns: int) -> bool:
-        """Whether the next evaluation is due (one per period)."""
+        """Whether the next evaluation is due (one per period). A clock that went back (a replay's sim time
+        restarting) restarts the schedule rather than pausing the evaluation until it catches up; it is counted."""
+        if self._last_started_ns is not None and now_ns < self._last_started_ns:
+            self.clock_jumps_back += 1
+            self._last_started_ns = None
         return self._last_started_ns is None or now_ns - self._last_started_ns >= self.settings.period_ns
 
     def prepare(

@@ -1263,6 +1263,7 @@ class LandingPlannerNode(Node):
                     live_rate_hz=live.settings.rate_hz,
                     live_evaluations=live.evaluations,
                     live_errors=live.errors,
+                    live_clock_jumps_back=live.clock_jumps_back,
                     live_status=latest.status if latest is not None else "none",
                     standby_available=live.standby_verdict is not None,
                 )
