@@ -22,8 +22,8 @@ first from the envelope's nearest stored plan), solved with the cold check (a wa
 solved again cold), replay-verified. Each verdict goes out on ``/helireach/live_reachability`` (latched
 ``DiagnosticStatus``; OK only for a replay-verified safe plan). A state older than ``live_max_state_age`` is not
 evaluated; without a measured rotor speed nothing is evaluated (the answer would rest on an assumed Ω). Live
-evaluation pauses while a failure episode runs (a verdict still in flight is dropped) and starts afresh after
-ENDED or LANDED.
+evaluation pauses while a failure episode runs (a verdict still in flight is dropped) and while it is LANDED (the
+engine still out, on the ground), and starts afresh after ENDED or once the engine runs again.
 
 **The standby plan.** On the failure, if the latest live verdict is replay-verified safe and its state is at
 most ``standby_max_age`` older than the failure, its plan is published at once, before the refined solve is
@@ -644,10 +644,12 @@ class LandingPlannerNode(Node):
             return None
 
     def _live_paused(self) -> bool:
-        """A failure episode runs: the planner's own, or the monitor's (until it ends or lands)."""
+        """A failure episode runs (the planner's own, or the monitor's), or it landed and the engine is still out:
+        on the ground with a failed engine "if the engine failed now" has no answer (and a drooping rotor made
+        every solve fail at full effort)."""
         with self._lock:
             failure, phase = self._failure, self._episode.phase
-        return (failure is not None and not failure.outcome) or phase is EpisodePhase.FAILED
+        return (failure is not None and not failure.outcome) or phase in (EpisodePhase.FAILED, EpisodePhase.LANDED)
 
     def _on_live_timer(self) -> None:
         """Starts a live evaluation if one is due and none is in flight (see the module docstring)."""
