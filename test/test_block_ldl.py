@@ -130,6 +130,25 @@ def test_the_factorization_reports_the_inertia_and_solves_like_numpy(library, se
 
 
 @needs_gcc
+@pytest.mark.parametrize("n", [1, 2])
+def test_a_matrix_too_small_for_the_analysis_header_is_refused_without_writing_past_ikeep(library, n):
+    """MA27's ikeep holds 3n integers; the analysis keeps n pairs and 5 header entries there, which needs n >= 3:
+    a smaller system is refused (info(1) = -1), and nothing past 3n is written."""
+    irn, icn = _ints(np.arange(1, n + 1)), _ints(np.arange(1, n + 1))  # a diagonal
+    guard = 7
+    ikeep = _ints(np.full(3 * n + guard, -12345))  # 3n as IPOPT allocates it, then a guard band
+    icntl, cntl, info = _ints(np.zeros(30)), np.zeros(5), _ints(np.zeros(20))
+    size, nz, liw = ctypes.c_int(n), ctypes.c_int(n), ctypes.c_int(1)
+    iw, iw1 = _ints(np.zeros(1)), _ints(np.zeros(2 * n))
+    nsteps, iflag, ops = ctypes.c_int(0), ctypes.c_int(0), ctypes.c_double(0.0)
+    library.ma27id_(_pointer(icntl), _pointer(cntl))
+    library.ma27ad_(ctypes.byref(size), ctypes.byref(nz), _pointer(irn), _pointer(icn), _pointer(iw),
+                    ctypes.byref(liw), _pointer(ikeep), _pointer(iw1), ctypes.byref(nsteps), ctypes.byref(iflag),
+                    _pointer(icntl), _pointer(cntl), _pointer(info), ctypes.byref(ops))  # fmt: skip
+    assert (info[0], info[1]) == (-1, n)
+    assert np.all(ikeep[3 * n :] == -12345)
+
+
 def test_a_pair_on_a_near_zero_jacobian_entry_is_paired_again_by_value(library):
     """Constraint 0 reaches a variable (least connected, so structurally preferred) through a 1e-13 entry only.
 

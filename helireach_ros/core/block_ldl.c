@@ -55,6 +55,7 @@ static void ma27id_impl(fint *icntl, double *cntl) {
 }
 
 static int analysis_stamp = 0x5eed;
+enum { IKEEP_MIN_N = 3 }; /* the smallest n whose 3n-long ikeep has room for n pairs and 5 header entries */
 static int verbose(void) { return getenv("BLOCK_LDL_VERBOSE") != NULL; }
 
 /* ---------------------------------------------------------------- analysis */
@@ -365,6 +366,8 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     (void)iw; (void)liw; (void)iw1; (void)iflag; (void)icntl; (void)cntl;
     int n = *N, nz = *NZ;
     memset(info, 0, 20 * sizeof(fint));
+    /* the analysis keeps its pairs in ikeep[0, n) and five header entries after them: MA27's ikeep holds 3n */
+    if (n < IKEEP_MIN_N) { info[0] = -1; info[1] = n; return; }
     for (int t = 0; t < nz; t++)
         if (irn[t] < 1 || irn[t] > n || icn[t] < 1 || icn[t] > n) { info[0] = -1; info[1] = t + 1; return; }
     uint64_t hash = structure_hash(nz, irn, icn);
