@@ -59,9 +59,10 @@ enum { IKEEP_MIN_N = 3 }; /* the smallest n whose 3n-long ikeep has room for n p
 static int verbose(void) { return getenv("BLOCK_LDL_VERBOSE") != NULL; }
 
 /* ---------------------------------------------------------------- analysis */
-/* Analyses by structure: IPOPT analyses again at every solve, of the same matrix structure. */
+/* Analyses by structure: IPOPT analyses again at every solve, of the same matrix structure. An entry keeps the
+ * structure itself (irn, icn), so a hash collision is a miss, never another matrix's pairs. */
 #define CACHE_SLOTS 16
-typedef struct { int n, nz; uint64_t hash; int *code; int b, lnz, m0; long used; } analysis;
+typedef struct { int n, nz; uint64_t hash; int *code; fint *irn, *icn; int b, lnz, m0; long used; } analysis;
 static analysis cache[CACHE_SLOTS];
 static long cache_clock = 0;
 static pthread_mutex_t cache_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -75,12 +76,13 @@ static uint64_t structure_hash(int nz, const fint *irn, const fint *icn) {
     return h;
 }
 
-static int cache_get(int n, int nz, uint64_t hash, fint *ikeep) {
+static int cache_get(int n, int nz, uint64_t hash, const fint *irn, const fint *icn, fint *ikeep) {
     int found = 0;
     pthread_mutex_lock(&cache_lock);
     for (int s = 0; s < CACHE_SLOTS; s++) {
         analysis *e = &cache[s];
-        if (e->code && e->n == n && e->nz == nz && e->hash == hash) {
+        if (e->code && e->n == n && e->nz == nz && e->hash == hash && !memcmp(e->irn, irn, nz * sizeof(fint)) &&
+            !memcmp(e->icn, icn, nz * sizeof(fint))) {
             memcpy(ikeep, e->code, n * sizeof(fint));
             ikeep[n] = MAGIC; ikeep[n + 1] = e->b; ikeep[n + 2] = e->lnz; ikeep[n + 3] = e->m0;
             e->used = ++cache_clock;
@@ -92,7 +94,13 @@ static int cache_get(int n, int nz, uint64_t hash, fint *ikeep) {
     return found;
 }
 
-static void cache_put(int n, int nz, uint64_t hash, const fint *ikeep) {
+static void cache_put(int n, int nz, uint64_t hash, const fint *irn, const fint *icn, const fint *ikeep) {
+    int *code = malloc(n * sizeof(int));
+    fint *rows = malloc(nz * sizeof(fint)), *cols = malloc(nz * sizeof(fint));
+    if (!code || !rows || !cols) { free(code); free(rows); free(cols); return; } /* no cache entry: analyse again */
+    memcpy(code, ikeep, n * sizeof(int));
+    memcpy(rows, irn, nz * sizeof(fint));
+    memcpy(cols, icn, nz * sizeof(fint));
     pthread_mutex_lock(&cache_lock);
     int victim = 0;
     for (int s = 0; s < CACHE_SLOTS; s++) {
@@ -100,9 +108,8 @@ static void cache_put(int n, int nz, uint64_t hash, const fint *ikeep) {
         if (cache[s].used < cache[victim].used) victim = s;
     }
     analysis *e = &cache[victim];
-    free(e->code);
-    e->code = malloc(n * sizeof(int));
-    memcpy(e->code, ikeep, n * sizeof(int));
+    free(e->code); free(e->irn); free(e->icn);
+    e->code = code; e->irn = rows; e->icn = cols;
     e->n = n; e->nz = nz; e->hash = hash;
     e->b = ikeep[n + 1]; e->lnz = ikeep[n + 2]; e->m0 = ikeep[n + 3];
     e->used = ++cache_clock;
@@ -374,7 +381,7 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     /* a fresh stamp for every analysis: a solve starts from the analysis's pairs, never from pairs an earlier solve
      * left in a workspace IPOPT reuses, so a solve's answer does not depend on the solves before it */
     ikeep[n + 4] = __atomic_add_fetch(&analysis_stamp, 1, __ATOMIC_RELAXED);
-    if (n >= 8 && cache_get(n, nz, hash, ikeep)) {
+    if (n >= 8 && cache_get(n, nz, hash, irn, icn, ikeep)) {
         int b = ikeep[n + 1], lnz = ikeep[n + 2];
         *nsteps = 1;
         *ops = 0;
@@ -391,7 +398,7 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     /* room for a value-based pairing's extra fill (ma27bd asks for more if even that is short) */
     info[4] = reals_needed(nz, b, 2 * lnz);
     info[5] = ints_needed(n, nz, b, 2 * lnz);
-    if (n >= 8) cache_put(n, nz, hash, ikeep);
+    if (n >= 8) cache_put(n, nz, hash, irn, icn, ikeep);
     if (verbose())
         fprintf(stderr, "block_ldl: n %d nz %d primal %d, %d blocks, %d multipliers unpaired, %d L blocks\n", n, nz, m0, b,
                 unmatched, lnz);
