@@ -4,7 +4,9 @@ The file is a plain MCAP file with header profile ``ros2``. Each topic gets a sc
 ``pkg/msg/Type`` (encoding ``ros2msg``: the root ``.msg`` text followed by every dependency, each
 once, after an 80-character ``=`` line and ``MSG: pkg/Type``) and a channel (message encoding
 ``cdr``, metadata ``offered_qos_profiles`` and ``topic_type_hash``). Messages are the rmw CDR bytes
-exactly as received. Like rosbag2 the writer also stores a ``rosbag2`` metadata record holding the
+as received, cut at the end of their content: the ROS 2 serializer leaves uninitialised bytes after a message with
+empty sequences, which ``rosbags`` refuses (:mod:`~helireach_ros.core.mcap_log.cdr_extent`). Like rosbag2 the
+writer also stores a ``rosbag2`` metadata record holding the
 bag metadata (version 9): without it ``ros2 bag play`` parses ``offered_qos_profiles`` with the
 pre-Jazzy integer enums and rejects the file. As ``rosbag2_storage_mcap`` does (its
 ``update_metadata`` runs once, when the bag is closed), that record is written exactly once, at
@@ -42,6 +44,7 @@ from typing import BinaryIO
 import yaml
 from mcap.writer import LIBRARY_IDENTIFIER, CompressionType, Writer
 
+from helireach_ros.core.mcap_log.cdr_extent import CdrLayout, CdrLayoutError, cdr_extent, parse_ros2msg_layout
 from helireach_ros.core.mcap_log.records import (
     INT64_MAX,
     ROSBAG2_METADATA_NAME,
@@ -62,7 +65,31 @@ class _Topic:
     type_name: str
     qos: QosDescription
     type_hash: str
+    layout: CdrLayout | None  # None: a schema this package cannot lay out; its messages are kept whole
     message_count: int = 0
+
+
+def _layout(type_name: str, definition: tuple[str, bytes]) -> CdrLayout | None:
+    """The CDR layout of a ``ros2msg`` schema; None for other encodings or a schema it cannot read."""
+    encoding, text = definition
+    if encoding != "ros2msg":
+        return None
+    try:
+        return parse_ros2msg_layout(type_name, text.decode("utf-8"))
+    except (CdrLayoutError, UnicodeDecodeError):
+        return None
+
+
+def _content(layout: CdrLayout | None, cdr: bytes) -> bytes:
+    """``cdr`` up to the end of its content, padded to 4 bytes as a DDS payload is; whole when it cannot be laid out
+    (a malformed message is kept as it came, for whoever reads the log to judge)."""
+    if layout is None:
+        return cdr
+    try:
+        extent = cdr_extent(layout, cdr)
+    except CdrLayoutError:
+        return cdr
+    return cdr[: -(-extent // 4) * 4]  # the 4-byte padding of a DDS payload is standard; readers accept it
 
 
 class McapLogWriter:
@@ -104,6 +131,7 @@ class McapLogWriter:
         self._lock = threading.Lock()
         self._topics: dict[str, _Topic] = {}
         self._schemas: dict[str, int] = {}
+        self._layouts: dict[str, CdrLayout | None] = {}
         self._custom = {str(k): str(v) for k, v in (metadata or {}).items()}
         self._start_ns: int | None = None
         self._end_ns = 0
@@ -198,6 +226,7 @@ class McapLogWriter:
                     definition = (encoding, text.encode("utf-8"))
                 schema_id = self._writer.register_schema(type_name, definition[0], definition[1])
                 self._schemas[type_name] = schema_id
+                self._layouts[type_name] = _layout(type_name, definition)
             if type_hash is None:
                 type_hash = type_description_hash(type_name)
             channel_id = self._writer.register_channel(
@@ -206,7 +235,7 @@ class McapLogWriter:
                 schema_id,
                 {"offered_qos_profiles": qos.to_rosbag2_yaml(), "topic_type_hash": type_hash},
             )
-            self._topics[topic] = _Topic(channel_id, type_name, qos, type_hash)
+            self._topics[topic] = _Topic(channel_id, type_name, qos, type_hash, self._layouts[type_name])
             self._sync()
             return channel_id
 
@@ -229,7 +258,7 @@ class McapLogWriter:
             if entry is None:
                 raise McapLogError(f"topic {topic} was not added with add_topic()", self._path)
             position = self._file.tell()
-            self._writer.add_message(entry.channel_id, log_time_ns, bytes(cdr), publish)
+            self._writer.add_message(entry.channel_id, log_time_ns, _content(entry.layout, bytes(cdr)), publish)
             entry.message_count += 1
             self._message_count += 1
             self._start_ns = log_time_ns if self._start_ns is None else min(self._start_ns, log_time_ns)
