@@ -20,6 +20,7 @@ from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
@@ -61,6 +62,10 @@ def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_l
     executor.add_node(node)
     statuses: list[DiagnosticStatus] = []
     trajectories: list[JointTrajectory] = []
+    ready: list[DiagnosticStatus] = []
+    states: list[Odometry] = []
+    node.create_subscription(DiagnosticStatus, rm.TOPIC_READY, ready.append, rm.LATCHED_QOS)
+    node.create_subscription(Odometry, rm.TOPIC_STATE, states.append, rm.STREAM_QOS)
     node.create_subscription(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS, statuses.append, rm.LATCHED_QOS)
     node.create_subscription(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY, trajectories.append, rm.LATCHED_QOS)
     odometry = node.create_publisher(Odometry, rm.TOPIC_ODOMETRY, rm.STREAM_QOS)
@@ -83,6 +88,17 @@ def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_l
 
     try:
         log_path = Path(wait_for_line(process, "helireach bringup: logging to", TIMEOUT_S).split(" to ", 1)[1].strip())
+        # What msg_docs/helireach_ready.md tells a vehicle to wait for: the nodes spinning, its publisher matched
+        # (monitor and recorder). Then not even the first message is lost.
+        deadline = time.monotonic() + TIMEOUT_S
+        while time.monotonic() < deadline and not (
+            ready and ready[-1].level == DiagnosticStatus.OK and odometry.get_subscription_count() >= 2
+        ):
+            executor.spin_once(timeout_sec=0.05)
+        assert ready and ready[-1].level == DiagnosticStatus.OK, "no /helireach/ready"
+        assert "helireach_planner" in rm.status_values(ready[-1])["nodes"].split()
+        assert fly_until(lambda: bool(states))
+        assert rm.stamp_nanoseconds(states[0].header.stamp) == stamps[0], "the first vehicle message was lost"
         assert fly_until(lambda: statuses and statuses[-1].level == DiagnosticStatus.OK), "no SAFE status"
         # Monitor and recorder both subscribed: the rising edge reaches the planner and the log.
         assert fly_until(lambda: failure.get_subscription_count() >= 2), "monitor or recorder never subscribed"
@@ -91,7 +107,12 @@ def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_l
         assert rm.stamp_nanoseconds(trajectories[0].header.stamp) in stamps
         process.send_signal(signal.SIGTERM)
         assert process.wait(timeout=TIMEOUT_S) == 0
-        assert f"log written to {log_path}" in process.stdout.read()
+        printed = process.stdout.read()
+        assert f"log written to {log_path}" in printed
+        stop_deadline = time.monotonic() + 2.0
+        while ready[-1].level != DiagnosticStatus.STALE and time.monotonic() < stop_deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert ready[-1].level == DiagnosticStatus.STALE, "the ready status must say the nodes stopped"
     finally:
         if process.poll() is None:
             process.kill()
@@ -111,3 +132,6 @@ def test_nodes_in_another_process_plan_a_failure_and_sigterm_leaves_a_complete_l
     ):
         assert topics[topic].message_count > 0, topic
     assert sum(1 for message in read_log(log_path) if message.topic == rm.TOPIC_LANDING_TRAJECTORY) >= 1
+    first_logged = next(message for message in read_log(log_path) if message.topic == rm.TOPIC_ODOMETRY)
+    first_odometry = deserialize_message(first_logged.cdr, Odometry)
+    assert rm.stamp_nanoseconds(first_odometry.header.stamp) == stamps[0], "the log must start with the first message"

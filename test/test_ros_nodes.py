@@ -158,6 +158,7 @@ def test_every_topic_has_its_documented_type_and_qos(no_ros_discovery) -> None:
             rm.TOPIC_PLAN_STATUS,
             rm.TOPIC_ROBUST_VERDICT,
             rm.TOPIC_TOUCHDOWN,
+            rm.TOPIC_READY,
         }
         # Every helireach node reports on /diagnostics.
         reporters: set[str] = set()

@@ -8,7 +8,10 @@ most 2 s) until the recorder has matched every publisher, so the log starts with
 message; the recorder's metadata names the airframe, envelope, software version and scenario. One
 single-threaded executor spins them all by default (:mod:`helireach_ros.ros.executors`), serving them in the
 order of :attr:`HelireachSystem.nodes` (the failure path first, the recorder last); the planner solves on its own
-thread, so no callback blocks the others.
+thread, so no callback blocks the others. Once the executor runs its first callbacks, the ``helireach_bringup``
+node publishes the latched ``/helireach/ready`` status (OK, naming the nodes) and ``helireach bringup`` prints
+``helireach bringup: ready``: from then on every message a matched subscription receives is processed (a vehicle
+waits for it, and for its own publishers to be matched, before it starts publishing). At shutdown it turns STALE.
 
 ``helireach bringup [--params-file F] [--with-sim] [--executor KIND]`` (:func:`run_bringup`) spins
 until Ctrl-C or SIGTERM and then finishes the log. Each node also has its own console script for
@@ -29,6 +32,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import rclpy
+from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.context import Context
 from rclpy.executors import Executor
 from rclpy.node import Node
@@ -38,6 +42,7 @@ from rclpy.signals import SignalHandlerOptions
 from helireach_ros import __version__
 from helireach_ros.core.mcap_log.run_metadata import aircraft_metadata
 from helireach_ros.core.resources import config_path
+from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, create_executor
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
 from helireach_ros.ros.nodes.monitor import VehicleMonitor
@@ -51,6 +56,7 @@ __all__ = [
     "DEFAULT_EXECUTOR",
     "DEFAULT_PARAMETERS",
     "HelireachSystem",
+    "ReadinessAnnouncer",
     "build_system",
     "ros_arguments",
     "run_bringup",
@@ -59,6 +65,7 @@ __all__ = [
 DEFAULT_PARAMETERS = "nodes.yaml"
 """The node parameter file in ``config/``, loaded before the user's."""
 _DRAIN_S = 0.3  # after a stop signal: run the callbacks already queued before finishing the log
+_READY_NODE_NAME = "helireach_bringup"
 _RECORDER_MATCH_TIMEOUT_S = 2.0  # bound on waiting for the recorder's subscriptions to match (in-process: ms)
 
 
@@ -70,6 +77,51 @@ def ros_arguments(params_files: Sequence[str | os.PathLike[str]] = (), ros_args:
             raise FileNotFoundError(f"parameter file {str(path)!r} not found")
         arguments += ["--params-file", str(path)]
     return [*arguments, *ros_args, "--"]
+
+
+class ReadinessAnnouncer(Node):
+    """Publishes the latched ``/helireach/ready`` status the first time the executor runs its callbacks: the proof
+    that the composed nodes are spinning, which their construction is not (a planner is built seconds before the
+    executor starts: a vehicle that began publishing at "planner ready" lost its first messages).
+
+    Args:
+        node_names: the composed nodes, named in the status.
+        values: further values of the status (the log path, the executor kind).
+        on_ready: called once, from the executor, after the status is published.
+    """
+
+    def __init__(
+        self,
+        *,
+        node_names: Sequence[str],
+        values: Mapping[str, str],
+        on_ready: Callable[[], None] | None = None,
+        **node_options,
+    ) -> None:
+        super().__init__(_READY_NODE_NAME, **node_options)
+        self._node_names = list(node_names)
+        self._values = {"nodes": " ".join(self._node_names), "software_version": __version__, **values}
+        self._on_ready = on_ready
+        self._publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_READY, rm.LATCHED_QOS)
+        self._timer = self.create_timer(0.01, self._announce)
+        self.ready = False
+
+    def _status(self, level: bytes, message: str) -> DiagnosticStatus:
+        return rm.diagnostic_status(level, f"{_READY_NODE_NAME}: ready", message, _READY_NODE_NAME, self._values)
+
+    def _announce(self) -> None:
+        self._timer.cancel()
+        if self.ready:
+            return
+        self.ready = True
+        self._publisher.publish(self._status(DiagnosticStatus.OK, f"ready: {', '.join(self._node_names)} spinning"))
+        if self._on_ready is not None:
+            self._on_ready()
+
+    def announce_stopping(self) -> None:
+        """Turns the latched status STALE: the nodes no longer process messages."""
+        with contextlib.suppress(Exception):  # the context may already be shut down
+            self._publisher.publish(self._status(DiagnosticStatus.STALE, "stopping: messages are no longer processed"))
 
 
 @dataclass
@@ -84,6 +136,7 @@ class HelireachSystem:
     sim: SimVehicleNode | None = None
     recorder: McapRecorder | None = None
     extra: list[Node] = field(default_factory=list)
+    readiness: ReadinessAnnouncer | None = None
     _closed: bool = False
     _signals: list[int] = field(default_factory=list)
 
@@ -96,6 +149,7 @@ class HelireachSystem:
         nodes += self.extra
         nodes += [self.envelope_status]
         nodes += [self.recorder] if self.recorder is not None else []
+        nodes += [self.readiness] if self.readiness is not None else []
         return nodes
 
     @property
@@ -154,6 +208,8 @@ class HelireachSystem:
         if self._closed:
             return
         self._closed = True
+        if self.readiness is not None:
+            self.readiness.announce_stopping()
         if self.recorder is not None:
             self.recorder.close()  # first: the file is complete whatever happens next
         for node in self.nodes:
@@ -202,6 +258,7 @@ def build_system(
     ros_args: Sequence[str] = (),
     executor: str = DEFAULT_EXECUTOR,
     command: str = "helireach bringup",
+    on_ready: Callable[[], None] | None = None,
 ) -> HelireachSystem:
     """Creates the composed system (not yet spinning).
 
@@ -216,6 +273,7 @@ def build_system(
         ros_args: further ROS arguments (e.g. ``["-p", "helireach_planner:deadline:=0.1"]``).
         executor: the executor kind (:data:`~helireach_ros.ros.executors.EXECUTOR_KINDS`).
         command: recorded in the log's metadata.
+        on_ready: called from the executor once ``/helireach/ready`` is published (:class:`ReadinessAnnouncer`).
     """
     context = context if context is not None else Context()
     # No rclpy signal handlers: they would shut the context down before the log is drained and finished
@@ -245,6 +303,13 @@ def build_system(
         for factory in extra_nodes:
             extra.append(factory(context=context))
             created.append(extra[-1])
+        readiness = ReadinessAnnouncer(
+            node_names=[node.get_name() for node in created],
+            values={"log_path": str(recorder.log_path) if recorder is not None else "", "executor": executor},
+            on_ready=on_ready,
+            context=context,
+        )
+        created.append(readiness)
         if recorder is not None:
             recorder.update_metadata(
                 _recorder_metadata({"planner": planner, "envelope_status": envelope_status, "sim": sim}, command)
@@ -257,7 +322,7 @@ def build_system(
             node.destroy_node()
         rclpy.try_shutdown(context=context)
         raise
-    system = HelireachSystem(context, spinner, monitor, envelope_status, planner, sim, recorder, extra)
+    system = HelireachSystem(context, spinner, monitor, envelope_status, planner, sim, recorder, extra, readiness)
     for node in system.nodes:
         drop_parameter_event_handlers(node)
         spinner.add_node(node)
@@ -285,6 +350,7 @@ def run_bringup(
         extra_nodes=extra_nodes,
         ros_args=ros_args,
         executor=executor,
+        on_ready=lambda: print("helireach bringup: ready", flush=True),
     )
     if system.log_path is not None:
         print(f"helireach bringup: logging to {system.log_path}", flush=True)

@@ -64,6 +64,7 @@ __all__ = [
     "TOPIC_LIVE_REACHABILITY",
     "TOPIC_ODOMETRY",
     "TOPIC_PLAN_STATUS",
+    "TOPIC_READY",
     "TOPIC_ROBUST_VERDICT",
     "TOPIC_ROTOR",
     "TOPIC_ROTOR_STATE",
@@ -112,6 +113,7 @@ TOPIC_PLAN_STATUS = "/helireach/plan_status"
 TOPIC_ROBUST_VERDICT = "/helireach/robust_verdict"
 TOPIC_TOUCHDOWN = "/helireach/touchdown"
 TOPIC_DIAGNOSTICS = "/diagnostics"
+TOPIC_READY = "/helireach/ready"
 
 ROTOR_JOINT = "main_rotor"
 COLLECTIVE_JOINT = "collective_thrust_coefficient"
@@ -187,6 +189,7 @@ TOPICS: dict[str, TopicSpec] = {
         TopicSpec(TOPIC_ROBUST_VERDICT, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_TOUCHDOWN, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_sim_vehicle"),
         TopicSpec(TOPIC_DIAGNOSTICS, "diagnostic_msgs/msg/DiagnosticArray", STREAM_QOS, "every helireach node"),
+        TopicSpec(TOPIC_READY, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_bringup"),
     )
 }
 """Every topic of the system (defaults; all remappable)."""
