@@ -6,6 +6,7 @@ Same set-up as ``test_ros_nodes.py`` (its harness: one context per test, discove
 from __future__ import annotations
 
 import time
+from array import array
 from collections.abc import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -13,6 +14,7 @@ from nav_msgs.msg import Odometry
 from rclpy.context import Context
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 from test_ros_nodes import OMEGA0, TIMEOUT_S, Harness, level_is
 from trajectory_msgs.msg import JointTrajectory
@@ -32,8 +34,6 @@ BEST_EFFORT = QoSProfile(
 )
 """What many vehicle drivers publish with (the sensor-data profile)."""
 S = 1_000_000_000
-
-
 
 
 def statuses_named(diagnostics: list[DiagnosticArray], name: str) -> list[DiagnosticStatus]:
@@ -243,5 +243,33 @@ def test_a_reported_input_problem_counts_until_its_report_is_older_than_the_time
         reported_at = time.monotonic()
         assert harness.keep_publishing(500 * FT, 75 * KT, until=level_is(safety, DiagnosticStatus.OK))
         assert time.monotonic() - reported_at >= 0.9  # not before qos_report_timeout (1 s)
+    finally:
+        harness.close()
+
+
+def test_oversized_vehicle_messages_are_rejected_unread_and_counted_beside_valid_ones(context: Context) -> None:
+    """A stream of 1.7 MB JointStates beside the vehicle's rotor readings: each is refused by its size before it is
+    read (counted, an ERROR naming the bound), and every valid reading beside it is still used."""
+    monitor = VehicleMonitor(context=context)
+    harness = Harness(context, monitor)
+    flood = harness.probe.create_publisher(JointState, rm.TOPIC_ROTOR, BEST_EFFORT)
+    oversized = JointState(name=[f"joint_{index:06d}" for index in range(100_000)])  # ~1.7 MB of names
+    oversized.velocity = array("d", [OMEGA0]) * 100_000
+    try:
+        rounds = 20
+        for index in range(rounds):
+            flood.publish(oversized)
+            flood.publish(oversized)
+            harness.publish_state(150.0, 38.0)
+
+            def handled(n: int = index + 1) -> bool:
+                values = rm.status_values(monitor.diagnostic())
+                return int(values["rotor_valid"]) == n and int(values["rotor_oversized"]) == 2 * n
+
+            assert harness.spin_until(handled), rm.status_values(monitor.diagnostic())
+        status = monitor.diagnostic()
+        values = rm.status_values(status)
+        assert values["rotor_rejected"] == str(2 * rounds) and values["odometry_oversized"] == "0"
+        assert status.level == DiagnosticStatus.ERROR and "exceeds max_input_bytes 65536" in status.message
     finally:
         harness.close()

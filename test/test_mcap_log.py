@@ -34,6 +34,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
@@ -55,6 +56,7 @@ VOLATILE = QosDescription("reliable", "volatile", 10)
 STATUS = "/helireach/safety_status"
 ODOM = "/vehicle/odometry"
 FAILURE = "/vehicle/engine_failure"
+ROTOR = "/vehicle/rotor"
 TRAJ = "/helireach/landing_trajectory"
 CROSS_PROCESS_TIMEOUT_S = 15.0
 # Cross-process publishers keep every test message until the recorder acknowledges it (waiting on
@@ -423,6 +425,37 @@ def test_recorder_reports_a_publisher_it_cannot_hear_with_one_event_handler_per_
         for node in (recorder, talker, listener):
             node.destroy_node()
     assert any(FAILURE in text and "RELIABILITY" in text for text in errors), errors
+
+
+def test_recorder_bounds_message_size_and_the_log_says_what_it_lacks(ros_context: Context, tmp_path: Path) -> None:
+    """Messages over ``max_message_bytes`` are not written; the log's metadata counts them per topic."""
+    ctx = ros_context
+    talker = Node("talker", context=ctx)
+    publisher = talker.create_publisher(JointState, ROTOR, qos_profile(VOLATILE))
+    recorder = McapRecorder(
+        context=ctx,
+        parameter_overrides=[Parameter("log_dir", value=str(tmp_path)), Parameter("max_message_bytes", value=4096)],
+    )
+    executor = SingleThreadedExecutor(context=ctx)
+    for node in (talker, recorder):
+        executor.add_node(node)
+
+    def spin() -> None:
+        executor.spin_once(timeout_sec=0.05)
+
+    try:
+        wait_for(lambda: publisher.get_subscription_count() > 0, 10, spin, "the recorder's subscription")
+        small = JointState(name=["main_rotor"], velocity=[27.0])
+        large = JointState(name=["main_rotor"], velocity=[27.0] * 1000)  # 8 kB
+        for message in (small, large, small, large, large):
+            publisher.publish(message)
+        wait_for(lambda: recorder.message_count == 2 and sum(recorder.oversized_counts.values()) == 3, 10, spin, "")
+    finally:
+        executor.shutdown()
+        for node in (recorder, talker):
+            node.destroy_node()
+    assert [len(deserialize_message(m.cdr, JointState).velocity) for m in read_log(recorder.log_path)] == [1, 1]
+    assert read_log_metadata(recorder.log_path)["helireach"]["oversized_dropped"] == f"{ROTOR}:3"
 
 
 def talker_in(ctx: Context) -> tuple[Node, SingleThreadedExecutor]:

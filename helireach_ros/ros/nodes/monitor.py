@@ -20,12 +20,14 @@ from __future__ import annotations
 
 import threading
 from collections import deque
+from collections.abc import Callable
 from functools import partial
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 
@@ -71,6 +73,12 @@ class VehicleMonitor(Node):
             "reject state messages whose stamp is older than this, s (0 = no check)",
             (0.0, 3600.0),
         )
+        self._max_input_bytes = declare(
+            "max_input_bytes",
+            65536,
+            "odometry or rotor messages larger than this are rejected unread, bytes",
+            (256, 1 << 30),
+        )
         self._stale_timeout = declare("stale_timeout", 0.5, "no valid state for this long = STALE, s", (0.01, 60.0))
         defaults = rm.StateLimits()
         self._limits = rm.StateLimits(
@@ -106,6 +114,8 @@ class VehicleMonitor(Node):
             "odometry_rejected": 0,
             "rotor_valid": 0,
             "rotor_rejected": 0,
+            "odometry_oversized": 0,
+            "rotor_oversized": 0,
             "failure_events": 0,
         }
         self._last_valid_odometry_ns: int | None = None
@@ -130,8 +140,15 @@ class VehicleMonitor(Node):
         )
         # Every vehicle input BEST_EFFORT, VOLATILE: reliable and best-effort, volatile and latched publishers all
         # match (msg_docs/vehicle_*.md); the flag is published steadily, so a lost sample only delays its edge.
-        self._qos_watch.create_subscription(Odometry, rm.TOPIC_ODOMETRY, self._on_odometry, rm.SENSOR_QOS)
-        self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR, self._on_rotor, rm.SENSOR_QOS)
+        # Read raw, so that an oversized message is refused before rclpy spends the executor's time building it (a
+        # stream of 1.7 MB JointStates made the monitor lose most of the valid rotor messages beside it).
+        for kind, message_type, topic, handler in (
+            ("odometry", Odometry, rm.TOPIC_ODOMETRY, self._on_odometry),
+            ("rotor", JointState, rm.TOPIC_ROTOR, self._on_rotor),
+        ):
+            self._qos_watch.create_subscription(
+                message_type, topic, partial(self._on_raw, kind, message_type, handler), rm.SENSOR_QOS, raw=True
+            )
         self._qos_watch.create_subscription(Bool, rm.TOPIC_ENGINE_FAILURE, self._on_failure_flag, rm.SENSOR_QOS)
         self.create_timer(diagnostics_period, self._publish_diagnostics)
 
@@ -169,6 +186,20 @@ class VehicleMonitor(Node):
         elif not verdict.accepted:
             self._reject(kind, list(verdict.problems), now_ns)
         return verdict.accepted
+
+    def _on_raw(self, kind: str, message_type: type, handler: Callable[[Any], None], data: bytes) -> None:
+        if len(data) > self._max_input_bytes:
+            with self._lock:
+                self._counts[f"{kind}_oversized"] += 1
+            problem = f"a message of {len(data)} bytes exceeds max_input_bytes {self._max_input_bytes}; not read"
+            self._reject(kind, [problem], self._now_ns())
+            return
+        try:
+            message = deserialize_message(data, message_type)
+        except Exception as error:  # bytes that are not the type: rejected like any bad input, the node runs on
+            self._reject(kind, [f"cannot be read as {message_type.__name__}: {error}"], self._now_ns())
+            return
+        handler(message)
 
     def _on_odometry(self, message: Odometry) -> None:
         now_ns = self._now_ns()
