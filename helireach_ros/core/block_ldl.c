@@ -1,7 +1,7 @@
 /* A block LDL^T for IPOPT's KKT systems, behind IPOPT's MA27 interface (helireach_ros.core.block_ldl builds it and
  * hands it to IPOPT as `linear_solver ma27`, `hsllib <this library>`; IPOPT 3.14 loads MA27's four routines
  * MA27ID/AD/BD/CD from any library). It replaces MUMPS for the landing NLPs: measured 0.46-0.50x of MUMPS's IPOPT
- * time on flyable plans, with about the same iterations and the same statuses and replay verdicts (docs/results/measurements-log.md).
+ * time on flyable plans, with about the same iterations and the same statuses and replay verdicts (docs/decisions/block-ldl.md).
  *
  * IPOPT's augmented system K = [H J^T; J -dc I] has a zero diagonal at every multiplier until IPOPT regularises,
  * so no 1x1 pivot order works for it. The analysis pairs each multiplier with a primal variable of its constraint
@@ -16,6 +16,15 @@
  * signs of the 2x2 pivots. There is no threshold pivoting: a pivot block that the Schur updates make small is
  * perturbed and reported as rank deficient (MA27's warning 3), so IPOPT regularises and factorizes again.
  *
+ * IPOPT's pivot tolerance (CNTL(1), its option ma27_pivtol, raised towards ma27_pivtolmax when IPOPT wants a more
+ * accurate factorization) scales the relative size below which a pivot counts as singular: 1e-12 for a 2x2 pivot at
+ * IPOPT's default 1e-8, 1e-8 at its largest 1e-4, so that raising it makes more nearly singular pivots perturbed and
+ * reported (IPOPT regularises), not a no-op.
+ *
+ * Errors, in INFO(1): -1 an order n below 3 or an index outside [1, n] (this also catches a caller with 64-bit
+ * indices, whose high words read as index 0: the routines take IPOPT's default 32-bit ipfint), -3/-4 workspace too
+ * small (INFO(2) says how much), -7 out of memory. IPOPT treats any of them but -3/-4 as a fatal solver error.
+ *
  * Debug switches (environment): BLOCK_LDL_VERBOSE, BLOCK_LDL_TIMES (a summary at exit), BLOCK_LDL_DUMPDIR (the
  * first 400 KKT matrices as text, for bench/linear_solver_compare.py --check-inertia), BLOCK_LDL_QUIET_PERTURB,
  * BLOCK_LDL_STRUCTURAL_PAIRS (pairs chosen by the structure alone, for comparison).
@@ -27,11 +36,16 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+/* Timing counters (BLOCK_LDL_TIMES) are shared by every thread that solves: updated under a lock, only when asked. */
 static double t_a, t_b, t_c; static long n_a, n_b, n_c, repairs;
+static pthread_mutex_t timing_lock = PTHREAD_MUTEX_INITIALIZER;
 static double now(void) { struct timespec ts; clock_gettime(CLOCK_MONOTONIC, &ts); return ts.tv_sec + 1e-9 * ts.tv_nsec; }
-__attribute__((destructor)) static void report(void) { if (getenv("BLOCK_LDL_TIMES")) fprintf(stderr, "block_ldl times: analyse %ld x %.1f us, factor %ld x %.1f us (%ld paired anew by values), solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), repairs, n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
+static int timing(void) { static int enabled = -1; if (enabled < 0) enabled = getenv("BLOCK_LDL_TIMES") != NULL; return enabled; }
+__attribute__((destructor)) static void report(void) { if (timing()) fprintf(stderr, "block_ldl times: analyse %ld x %.1f us, factor %ld x %.1f us (%ld paired anew by values), solve %ld x %.1f us\n", n_a, 1e6 * t_a / (n_a ? n_a : 1), n_b, 1e6 * t_b / (n_b ? n_b : 1), __atomic_load_n(&repairs, __ATOMIC_RELAXED), n_c, 1e6 * t_c / (n_c ? n_c : 1)); }
 
-typedef int fint;
+typedef int fint; /* IPOPT's ipfint without IPOPT_INT64: a 64-bit caller is refused by the index check (header) */
+_Static_assert(sizeof(fint) == 4, "MA27's interface takes 32-bit integers");
+enum { OUT_OF_MEMORY = -7 };
 #define MAGIC 0x4c444c32
 #define HEADER 8
 
@@ -48,10 +62,18 @@ static inline void mul_tn(const double *a, const double *b, double *c) { /* c = 
     c[3] = a[1] * b[1] + a[3] * b[3];
 }
 
+#define DEFAULT_PIVOT_TOLERANCE 1e-8 /* IPOPT's ma27_pivtol default, the tolerance the thresholds were measured at */
 static void ma27id_impl(fint *icntl, double *cntl) {
     memset(icntl, 0, 30 * sizeof(fint));
     memset(cntl, 0, 5 * sizeof(double));
-    cntl[0] = 0.1;
+    cntl[0] = DEFAULT_PIVOT_TOLERANCE;
+}
+
+/* How much stricter than at the default tolerance the singular-pivot test is: 1 at or below IPOPT's default, up to
+ * 1e4 at its largest tolerance 1e-4 (a NaN or negative tolerance counts as the default). */
+static double pivot_strictness(const double *cntl) {
+    double ratio = cntl ? cntl[0] / DEFAULT_PIVOT_TOLERANCE : 1.0;
+    return ratio > 1.0 ? fmin(ratio, 1e4) : 1.0;
 }
 
 static int analysis_stamp = 0x5eed;
@@ -124,16 +146,24 @@ typedef struct {
     double tau;       /* with values: a pair's |a| must be at least tau times its multiplier's largest entry */
 } graph;
 
-static void build_graph(graph *g, const fint *irn, const fint *icn, const double *a) {
+/* Builds g's adjacency; 0, or OUT_OF_MEMORY with nothing allocated. */
+static int build_graph(graph *g, const fint *irn, const fint *icn, const double *a) {
     int n = g->n, nz = g->nz;
     int *count = calloc(n + 1, sizeof(int));
+    if (!count) return OUT_OF_MEMORY;
     for (int t = 0; t < nz; t++) {
         int i = irn[t] - 1, j = icn[t] - 1;
         if (i != j) { count[i + 1]++; count[j + 1]++; }
     }
     for (int i = 0; i < n; i++) count[i + 1] += count[i];
-    int *adj = malloc((count[n] > 0 ? count[n] : 1) * sizeof(int)), *cursor = malloc(n * sizeof(int));
-    double *val = a ? malloc((count[n] > 0 ? count[n] : 1) * sizeof(double)) : NULL;
+    size_t entries = count[n] > 0 ? count[n] : 1;
+    int *adj = malloc(entries * sizeof(int)), *cursor = malloc(n * sizeof(int));
+    int *mark = malloc(n * sizeof(int)), *where = malloc(n * sizeof(int)), *p = malloc((n + 1) * sizeof(int));
+    double *val = a ? malloc(entries * sizeof(double)) : NULL;
+    if (!adj || !cursor || !mark || !where || !p || (a && !val)) {
+        free(count); free(adj); free(cursor); free(mark); free(where); free(p); free(val);
+        return OUT_OF_MEMORY;
+    }
     memcpy(cursor, count, n * sizeof(int));
     for (int t = 0; t < nz; t++) {
         int i = irn[t] - 1, j = icn[t] - 1;
@@ -143,9 +173,7 @@ static void build_graph(graph *g, const fint *irn, const fint *icn, const double
         }
     }
     /* deduplicate in place (a repeated entry keeps its largest magnitude) */
-    int *mark = malloc(n * sizeof(int)), *where = malloc(n * sizeof(int));
     for (int i = 0; i < n; i++) mark[i] = -1;
-    int *p = malloc((n + 1) * sizeof(int));
     int out = 0;
     for (int i = 0; i < n; i++) {
         p[i] = out;
@@ -165,6 +193,7 @@ static void build_graph(graph *g, const fint *irn, const fint *icn, const double
     g->adjp = p;
     g->adji = adj;
     g->adjx = val;
+    return 0;
 }
 
 /* Whether the edge (multiplier j, primal at adjacency position q) may be a 2x2 pivot: structure only, or an entry
@@ -188,11 +217,15 @@ static int augment(const graph *g, int j, int *visited, int stamp, const double 
     return 0;
 }
 
-static void match(graph *g) {
+/* Pairs multipliers with primal variables into g->mate; 0, or OUT_OF_MEMORY (g->mate may then be set, freed by the
+ * caller with the graph). */
+static int match(graph *g) {
     int n = g->n, m0 = g->m0;
     g->mate = malloc(n * sizeof(int));
-    for (int i = 0; i < n; i++) g->mate[i] = -1;
     double *rowmax = calloc(n, sizeof(double));
+    int *visited = calloc(n, sizeof(int));
+    if (!g->mate || !rowmax || !visited) { free(rowmax); free(visited); return OUT_OF_MEMORY; }
+    for (int i = 0; i < n; i++) g->mate[i] = -1;
     if (g->adjx)
         for (int j = m0; j < n; j++)
             for (int q = g->adjp[j]; q < g->adjp[j + 1]; q++)
@@ -206,7 +239,6 @@ static void match(graph *g) {
         }
         if (best >= 0) { g->mate[best] = j; g->mate[j] = best; }
     }
-    int *visited = calloc(n, sizeof(int));
     int unmatched = 0, stamp = 0;
     for (int strict = 1; strict >= 0; strict--) { /* strong edges first; then any edge, so every multiplier pairs */
         unmatched = 0;
@@ -218,6 +250,7 @@ static void match(graph *g) {
     }
     free(visited); free(rowmax);
     g->unmatched = unmatched;
+    return 0;
 }
 
 static int popcount_row(const uint64_t *row, int words) {
@@ -227,13 +260,14 @@ static int popcount_row(const uint64_t *row, int words) {
 }
 
 /* Minimum-degree order of the block graph (explicit elimination graph in bitsets: the graphs here are small). */
-static void min_degree(int b, const int *bp, const int *bi, int *order) {
+static int min_degree(int b, const int *bp, const int *bi, int *order) {
     int words = (b + 63) / 64;
-    uint64_t *adj = calloc((size_t)b * words, sizeof(uint64_t));
+    uint64_t *adj = calloc((size_t)b * words > 0 ? (size_t)b * words : 1, sizeof(uint64_t));
+    int *deg = malloc((b > 0 ? b : 1) * sizeof(int));
+    char *done = calloc(b > 0 ? b : 1, 1);
+    if (!adj || !deg || !done) { free(adj); free(deg); free(done); return OUT_OF_MEMORY; }
     for (int u = 0; u < b; u++)
         for (int q = bp[u]; q < bp[u + 1]; q++) adj[(size_t)u * words + bi[q] / 64] |= 1ULL << (bi[q] % 64);
-    int *deg = malloc(b * sizeof(int));
-    char *done = calloc(b, 1);
     for (int u = 0; u < b; u++) deg[u] = popcount_row(adj + (size_t)u * words, words);
     for (int k = 0; k < b; k++) {
         int v = -1;
@@ -257,19 +291,19 @@ static void min_degree(int b, const int *bp, const int *bi, int *order) {
         memset(rv, 0, words * sizeof(uint64_t));
     }
     free(adj); free(deg); free(done);
+    return 0;
 }
 
 /* Entries of the upper block triangle by column block: row block, where in the 2x2 block, value. */
-static void block_columns(int n, int nz, int b, const fint *irn, const fint *icn, const double *a, const fint *code,
-                          fint *cp, fint *ci, fint *cs, double *cx, fint *pos) {
-    (void)n;
+/* cursor: b integers of workspace. */
+static void block_columns(int nz, int b, const fint *irn, const fint *icn, const double *a, const fint *code,
+                          fint *cp, fint *ci, fint *cs, double *cx, fint *pos, fint *cursor) {
     memset(cp, 0, (b + 1) * sizeof(fint));
     for (int t = 0; t < nz; t++) {
         int bi = code[irn[t] - 1] >> 1, bj = code[icn[t] - 1] >> 1;
         cp[(bi > bj ? bi : bj) + 1]++;
     }
     for (int k = 0; k < b; k++) cp[k + 1] += cp[k];
-    fint *cursor = malloc((b > 0 ? b : 1) * sizeof(fint));
     memcpy(cursor, cp, b * sizeof(fint));
     for (int t = 0; t < nz; t++) {
         int ci_ = code[irn[t] - 1], cj = code[icn[t] - 1];
@@ -285,7 +319,6 @@ static void block_columns(int n, int nz, int b, const fint *irn, const fint *icn
         if (cx) cx[p] = a[t];
         if (pos) pos[t] = p;
     }
-    free(cursor);
 }
 
 static int block_symbolic(int b, const fint *cp, const fint *ci, fint *lp, fint *parent, fint *lnz, fint *flag) {
@@ -311,11 +344,13 @@ static int ints_needed(int n, int nz, int b, int lnz) {
 }
 
 /* The analysis: pairs, block order and L's block count into code[0..n) (2 * block position + slot); with values
- * (a != NULL) a pair needs an entry of at least tau times its multiplier's largest one where any pairing allows. */
-static void analyse(int n, int nz, const fint *irn, const fint *icn, const double *a, double tau, fint *code,
-                    int *b_out, int *lnz_out, int *m0_out, int *unmatched_out, double *flops_out) {
+ * (a != NULL) a pair needs an entry of at least tau times its multiplier's largest one where any pairing allows.
+ * Returns 0, or OUT_OF_MEMORY (code unspecified). */
+static int analyse(int n, int nz, const fint *irn, const fint *icn, const double *a, double tau, fint *code,
+                   int *b_out, int *lnz_out, int *m0_out, int *unmatched_out, double *flops_out) {
     graph g = {n, nz, n, 0, NULL, NULL, NULL, NULL, tau};
-    build_graph(&g, irn, icn, a);
+    int status = build_graph(&g, irn, icn, a);
+    if (status) return status;
     /* the trailing independent block: every node from m0 on has no neighbour after it */
     int m0 = n;
     while (m0 > 0) {
@@ -326,9 +361,14 @@ static void analyse(int n, int nz, const fint *irn, const fint *icn, const doubl
     }
     if (m0 == 0) m0 = n; /* a diagonal matrix: no multipliers */
     g.m0 = m0;
-    match(&g);
+    int *block_of = NULL, *slot_of = NULL, *bcount = NULL, *badj = NULL, *bcur = NULL, *order = NULL, *position = NULL;
+    fint *cp = NULL, *ci = NULL, *lp = NULL, *parent = NULL, *lnzc = NULL, *flag = NULL;
+    status = match(&g);
+    if (status) goto done;
+    block_of = malloc(n * sizeof(int));
+    slot_of = malloc(n * sizeof(int));
+    if (!block_of || !slot_of) { status = OUT_OF_MEMORY; goto done; }
     /* blocks: a pair (primal slot 0, multiplier slot 1) or a single node (slot 0) padded with a unit slot 1 */
-    int *block_of = malloc(n * sizeof(int)), *slot_of = malloc(n * sizeof(int));
     int b = 0;
     for (int i = 0; i < n; i++) {
         if (i < m0) {
@@ -340,31 +380,43 @@ static void analyse(int n, int nz, const fint *irn, const fint *icn, const doubl
         }
     }
     /* block graph */
-    int *bcount = calloc(b + 1, sizeof(int));
+    bcount = calloc(b + 1, sizeof(int));
+    if (!bcount) { status = OUT_OF_MEMORY; goto done; }
     for (int i = 0; i < n; i++)
         for (int q = g.adjp[i]; q < g.adjp[i + 1]; q++)
             if (block_of[g.adji[q]] != block_of[i]) bcount[block_of[i] + 1]++;
     for (int k = 0; k < b; k++) bcount[k + 1] += bcount[k];
-    int *badj = malloc((bcount[b] > 0 ? bcount[b] : 1) * sizeof(int)), *bcur = malloc(b * sizeof(int));
+    badj = malloc((bcount[b] > 0 ? bcount[b] : 1) * sizeof(int));
+    bcur = malloc((b > 0 ? b : 1) * sizeof(int));
+    order = malloc((b > 0 ? b : 1) * sizeof(int));
+    position = malloc((b > 0 ? b : 1) * sizeof(int));
+    cp = malloc((b + 1) * sizeof(fint));
+    ci = malloc((nz > 0 ? nz : 1) * sizeof(fint));
+    lp = malloc((b + 1) * sizeof(fint));
+    parent = malloc((b > 0 ? b : 1) * sizeof(fint));
+    lnzc = malloc((b > 0 ? b : 1) * sizeof(fint));
+    flag = malloc((b > 0 ? b : 1) * sizeof(fint));
+    if (!badj || !bcur || !order || !position || !cp || !ci || !lp || !parent || !lnzc || !flag) {
+        status = OUT_OF_MEMORY;
+        goto done;
+    }
     memcpy(bcur, bcount, b * sizeof(int));
     for (int i = 0; i < n; i++)
         for (int q = g.adjp[i]; q < g.adjp[i + 1]; q++)
             if (block_of[g.adji[q]] != block_of[i]) badj[bcur[block_of[i]]++] = block_of[g.adji[q]];
-    int *order = malloc(b * sizeof(int)), *position = malloc(b * sizeof(int));
-    min_degree(b, bcount, badj, order);
+    if ((status = min_degree(b, bcount, badj, order))) goto done;
     for (int k = 0; k < b; k++) position[order[k]] = k;
     for (int i = 0; i < n; i++) code[i] = 2 * position[block_of[i]] + slot_of[i];
-    fint *cp = malloc((b + 1) * sizeof(fint)), *ci = malloc((nz > 0 ? nz : 1) * sizeof(fint));
-    fint *lp = malloc((b + 1) * sizeof(fint)), *parent = malloc(b * sizeof(fint));
-    fint *lnzc = malloc(b * sizeof(fint)), *flag = malloc(b * sizeof(fint));
-    block_columns(n, nz, b, irn, icn, NULL, code, cp, ci, NULL, NULL, NULL);
+    block_columns(nz, b, irn, icn, NULL, code, cp, ci, NULL, NULL, NULL, flag); /* flag: free until the symbolic */
     int lnz = block_symbolic(b, cp, ci, lp, parent, lnzc, flag);
     double flops = 0;
     for (int k = 0; k < b; k++) flops += 8.0 * lnzc[k] * lnzc[k];
     *b_out = b; *lnz_out = lnz; *m0_out = m0; *unmatched_out = g.unmatched; *flops_out = flops;
+done:
     free(cp); free(ci); free(lp); free(parent); free(lnzc); free(flag);
     free(block_of); free(slot_of); free(bcount); free(badj); free(bcur); free(order); free(position);
     free(g.adjp); free(g.adji); free(g.adjx); free(g.mate);
+    return status;
 }
 
 static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, fint *iw, const fint *liw,
@@ -391,7 +443,10 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     }
     int b, lnz, m0, unmatched;
     double flops;
-    analyse(n, nz, irn, icn, NULL, 0.0, ikeep, &b, &lnz, &m0, &unmatched, &flops);
+    if (analyse(n, nz, irn, icn, NULL, 0.0, ikeep, &b, &lnz, &m0, &unmatched, &flops)) {
+        info[0] = OUT_OF_MEMORY;
+        return;
+    }
     ikeep[n] = MAGIC; ikeep[n + 1] = b; ikeep[n + 2] = lnz; ikeep[n + 3] = m0;
     *nsteps = 1;
     *ops = flops;
@@ -413,9 +468,11 @@ static void ma27ad_impl(const fint *N, const fint *NZ, const fint *irn, const fi
 #define PAIR_TAU 1e-2
 #define PAIR_KEEP 1e-8
 
+/* 1 if a pair's entry is below keep times its multiplier's largest, 0 if none is, OUT_OF_MEMORY. */
 static int weak_pair(int n, int nz, const fint *irn, const fint *icn, const double *a, const fint *code, int b,
                      double keep) {
-    double *rowmax = calloc(2 * b, sizeof(double)), *pair = calloc(b, sizeof(double));
+    double *rowmax = calloc(2 * b + 1, sizeof(double)), *pair = calloc(b + 1, sizeof(double));
+    if (!rowmax || !pair) { free(rowmax); free(pair); return OUT_OF_MEMORY; }
     /* a pair's slot-1 node is its multiplier; a block whose slot 1 holds no node is a single primal node */
     for (int t = 0; t < nz; t++) {
         int i = irn[t] - 1, j = icn[t] - 1;
@@ -438,10 +495,11 @@ static int weak_pair(int n, int nz, const fint *irn, const fint *icn, const doub
 static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fint *icn, double *a, const fint *la,
                         fint *iw, const fint *liw, const fint *ikeep, const fint *nsteps, fint *maxfrt, fint *iw1,
                         const fint *icntl, const double *cntl, fint *info) {
-    (void)nsteps; (void)iw1; (void)icntl; (void)cntl;
+    (void)nsteps; (void)iw1; (void)icntl;
     int n = *N, nz = *NZ;
     memset(info, 0, 20 * sizeof(fint));
-    if (ikeep[n] != MAGIC) { info[0] = -1; return; }
+    if (n < IKEEP_MIN_N || ikeep[n] != MAGIC) { info[0] = -1; return; }
+    double strictness = pivot_strictness(cntl);
     fint *hdr = iw, *code = iw + HEADER;
     int stamp = ikeep[n + 4];
     /* the pairs in force: this solve's value-based ones if an earlier factorization made them, else the analysis's */
@@ -449,11 +507,17 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     const fint *pairs = have ? code : ikeep;
     int b = have ? hdr[2] : ikeep[n + 1], lnz = have ? hdr[3] : ikeep[n + 2];
     fint *fresh = NULL;
-    if (!getenv("BLOCK_LDL_STRUCTURAL_PAIRS") && weak_pair(n, nz, irn, icn, a, pairs, b, have ? PAIR_KEEP : PAIR_TAU)) {
+    int weak = getenv("BLOCK_LDL_STRUCTURAL_PAIRS") ? 0 : weak_pair(n, nz, irn, icn, a, pairs, b, have ? PAIR_KEEP : PAIR_TAU);
+    if (weak == OUT_OF_MEMORY) { info[0] = OUT_OF_MEMORY; return; }
+    if (weak) {
         int m0, unmatched;
         double flops;
         fresh = malloc(n * sizeof(fint));
-        analyse(n, nz, irn, icn, a, PAIR_TAU, fresh, &b, &lnz, &m0, &unmatched, &flops);
+        if (!fresh || analyse(n, nz, irn, icn, a, PAIR_TAU, fresh, &b, &lnz, &m0, &unmatched, &flops)) {
+            free(fresh);
+            info[0] = OUT_OF_MEMORY;
+            return;
+        }
     }
     int need_r = reals_needed(nz, b, lnz), need_i = ints_needed(n, nz, b, lnz);
     if (*liw < need_i || *la < need_r) { /* checked before anything is written into iw */
@@ -461,10 +525,17 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
         if (*liw < need_i) { info[0] = -3; info[1] = need_i; } else { info[0] = -4; info[1] = need_r; }
         return;
     }
+    char *real1 = calloc(b + 1, 1); /* which slots are real: a block whose slot 1 holds no node is padded with 1 */
+    double *rowmax = calloc(2 * b + 1, sizeof(double)); /* by slot */
+    if (!real1 || !rowmax) {
+        free(real1); free(rowmax); free(fresh);
+        info[0] = OUT_OF_MEMORY;
+        return;
+    }
     if (fresh) {
         memcpy(code, fresh, n * sizeof(fint));
         free(fresh);
-        repairs++;
+        __atomic_add_fetch(&repairs, 1, __ATOMIC_RELAXED);
         have = 0; /* the structure below is built again from these pairs */
     } else if (!have) {
         memcpy(code, ikeep, n * sizeof(fint));
@@ -477,14 +548,11 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
         for (int t = 0; t < nz; t++) cx[pos[t]] = a[t];
     } else {
         hdr[0] = 0;
-        block_columns(n, nz, b, irn, icn, a, code, cp, ci, cs, cx, pos);
+        block_columns(nz, b, irn, icn, a, code, cp, ci, cs, cx, pos, flag); /* flag: free until the symbolic */
         block_symbolic(b, cp, ci, lp, parent, lnzc, flag);
         hdr[1] = n; hdr[2] = b; hdr[3] = lnz; hdr[4] = nz; hdr[5] = stamp; hdr[0] = MAGIC;
     }
-    /* which slots are real: a block whose slot 1 holds no node is padded with 1 on its diagonal */
-    char *real1 = calloc(b, 1);
     for (int i = 0; i < n; i++) if (code[i] & 1) real1[code[i] >> 1] = 1;
-    double *rowmax = calloc(2 * b, sizeof(double)); /* by slot */
     for (int t = 0; t < nz; t++) {
         double v = fabs(a[t]);
         int s = code[irn[t] - 1], r = code[icn[t] - 1];
@@ -532,10 +600,10 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
         double det = d0 * d3 - off * off;
         int singular;
         if (!real1[k]) {
-            singular = !(fabs(d0) > 1e-14 * rowmax[2 * k]);
+            singular = !(fabs(d0) > 1e-14 * strictness * rowmax[2 * k]);
         } else {
             double term = fmax(fabs(d0 * d3), off * off);
-            singular = !(fabs(det) > 1e-12 * term) || !(term > 1e-28 * rowmax[2 * k] * rowmax[2 * k + 1]);
+            singular = !(fabs(det) > 1e-12 * strictness * term) || !(term > 1e-28 * rowmax[2 * k] * rowmax[2 * k + 1]);
         }
         if (singular) {
             perturbed++;
@@ -557,14 +625,19 @@ static void ma27bd_impl(const fint *N, const fint *NZ, const fint *irn, const fi
     {
         static int dumped = 0;
         const char *dir = getenv("BLOCK_LDL_DUMPDIR");
-        if (dir && dumped < 400) {
+        int index = dir ? __atomic_fetch_add(&dumped, 1, __ATOMIC_RELAXED) : 0;
+        if (dir && index < 400) {
             char name[512];
-            snprintf(name, sizeof name, "%s/f%04d.txt", dir, dumped++);
+            snprintf(name, sizeof name, "%s/f%04d.txt", dir, index);
             FILE *f = fopen(name, "w");
-            fprintf(f, "%d %d %d %d\n", n, nz, negative, perturbed);
-            for (int i = 0; i < n; i++) fprintf(f, "%d\n", code[i]);
-            for (int t = 0; t < nz; t++) fprintf(f, "%d %d %.17g\n", irn[t], icn[t], a[t]);
-            fclose(f);
+            if (!f) {
+                if (index == 0) fprintf(stderr, "block_ldl: cannot write %s (BLOCK_LDL_DUMPDIR): no matrices dumped\n", name);
+            } else {
+                fprintf(f, "%d %d %d %d\n", n, nz, negative, perturbed);
+                for (int i = 0; i < n; i++) fprintf(f, "%d\n", code[i]);
+                for (int t = 0; t < nz; t++) fprintf(f, "%d %d %.17g\n", irn[t], icn[t], a[t]);
+                fclose(f);
+            }
         }
     }
     info[1] = n - perturbed;
@@ -611,7 +684,11 @@ static void ma27cd_impl(const fint *N, const double *a, const fint *la, const fi
     for (int i = 0; i < n; i++) rhs[i] = w[code[i]];
 }
 
-#define TIMED(f, acc, cnt) double s_ = now(); f; acc += now() - s_; cnt++;
+#define TIMED(f, acc, cnt) \
+    if (!timing()) { f; } else { \
+        double s_ = now(); f; double d_ = now() - s_; \
+        pthread_mutex_lock(&timing_lock); acc += d_; cnt++; pthread_mutex_unlock(&timing_lock); \
+    }
 #define ma27ad_timed(...) do { TIMED(ma27ad_impl(__VA_ARGS__), t_a, n_a) } while (0)
 #define ma27bd_timed(...) do { TIMED(ma27bd_impl(__VA_ARGS__), t_b, n_b) } while (0)
 #define ma27cd_timed(...) do { TIMED(ma27cd_impl(__VA_ARGS__), t_c, n_c) } while (0)
