@@ -12,7 +12,12 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
+from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import StoredPlan
+from helireach_ros.core.model import initial_state_after_failure
+from helireach_ros.core.planner import LandingPlanner
+from helireach_ros.core.settings import load_settings
+from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 
 MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"
@@ -97,3 +102,28 @@ def test_every_topic_is_documented_with_its_type_and_qos(topic: str) -> None:
     page = MSG_DOCS / re.search(r"\]\(([^)]+\.md)\)", row).group(1)
     text = page.read_text()
     assert f"`{spec.type_name}`" in text and ("Rate" in text or "rate" in text)
+
+
+def test_the_trajectory_point_counts_msg_docs_states_are_the_ones_sent() -> None:
+    """msg_docs/helireach_landing_trajectory.md states how many points a plan is sent as; the planner's messages
+    have them: one per breakpoint of a flyable plan (one more with a reaction delay), two per interval of a
+    verified plan and one at the landing time; the last point at the landing time."""
+    text = " ".join((MSG_DOCS / "helireach_landing_trajectory.md").read_text().split())
+    documented = re.search(r"(\d+) points for the default (\d+) intervals", text)
+    verified = re.search(r"(\d+) points for (\d+) intervals", text)
+    assert documented is not None and verified is not None, "the page no longer states the point counts"
+    points, intervals = int(documented.group(1)), int(documented.group(2))
+    assert int(verified.group(2)) == intervals
+    assert load_settings().intervals == intervals
+    airframe = load_airframe("uh60a_class")
+    state = initial_state_after_failure(airframe, 500 * FT, 75 * KT)
+    plans = {
+        "flyable": LandingPlanner(airframe, load_settings()).plan(state),
+        "delayed": LandingPlanner(airframe, load_settings(reaction_delay_s=0.5)).plan(state),
+        "verified": LandingPlanner(airframe, load_settings(method="verified")).plan(state),
+    }
+    counts = {kind: len(rm.trajectory_message(plan, 0).points) for kind, plan in plans.items()}
+    assert counts == {"flyable": points, "delayed": points + 1, "verified": int(verified.group(1))}
+    for plan in plans.values():
+        last = rm.trajectory_message(plan, 0).points[-1].time_from_start
+        assert rm.duration_seconds(last) == pytest.approx(plan.time_to_land, abs=2e-6)
