@@ -150,7 +150,8 @@ def test_the_composed_system_waits_on_no_parameter_event_handlers(no_ros_discove
             "helireach_planner",
             "helireach_envelope_status",
             "helireach_recorder",
-        ]  # the failure path first, the recorder last
+            "helireach_bringup",
+        ]  # the failure path first, the recorder and the one-shot readiness announcement last
         for node in system.nodes:
             parameter_events = [p for p in node.publishers if p.topic_name == "/parameter_events"]
             assert len(parameter_events) == 1 and parameter_events[0].event_handlers == []

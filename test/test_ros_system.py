@@ -114,7 +114,7 @@ def test_the_log_holds_every_topic_and_the_run_metadata(demo) -> None:
     assert deserialize_message(touchdowns[0].cdr, DiagnosticStatus).level == DiagnosticStatus.OK
 
 
-def test_every_message_of_the_log_is_decoded_by_rosbags_mcap_ros2_and_rclpy(demo) -> None:
+def test_every_message_of_the_log_is_decoded_by_rosbags_mcap_ros2_rclpy_and_read_log(demo) -> None:
     """Three independent decoders read every message whole: rosbags checks that a message's bytes end where its
     content does, which the ROS 2 serializer's leftover bytes after empty sequences used to break (every landing
     trajectory); rclpy reads what the nodes would be replayed."""
@@ -136,6 +136,10 @@ def test_every_message_of_the_log_is_decoded_by_rosbags_mcap_ros2_and_rclpy(demo
             rclpy_deserialize(message.data, getattr(importlib.import_module(f"{package}.msg"), type_name))
             counts[channel.topic] = counts.get(channel.topic, 0) + 1
     assert counts[rm.TOPIC_LANDING_TRAJECTORY] > 10, counts
+    own: dict[str, int] = {}
+    for message in read_log(demo.log_path):  # the package's own reader: the same messages
+        own[message.topic] = own.get(message.topic, 0) + 1
+    assert own == counts
 
 
 def test_replay_compare_reproduces_the_logged_plan(demo, capsys) -> None:

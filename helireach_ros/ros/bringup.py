@@ -102,7 +102,9 @@ class ReadinessAnnouncer(Node):
         self._node_names = list(node_names)
         self._values = {"nodes": " ".join(self._node_names), "software_version": __version__, **values}
         self._on_ready = on_ready
-        self._publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_READY, rm.LATCHED_QOS)
+        self._publisher = self.create_publisher(
+            DiagnosticStatus, rm.TOPIC_READY, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
+        )  # no QoS-event waitables: the executor re-adds each at every wait
         self._timer = self.create_timer(0.01, self._announce)
         self.ready = False
 
