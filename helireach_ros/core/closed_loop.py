@@ -25,9 +25,9 @@ import numpy as np
 
 from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.estimation import estimate_gross_weight
+from helireach_ros.core.landing_supervisor import plan_time_remaining, replanning_ends
 from helireach_ros.core.model import clip_rotor_speed_noise, state_from_sensors
 from helireach_ros.core.planner import LandingPlan, LandingPlanner, get_planner
-from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
 from helireach_ros.core.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
 
 __all__ = ["ClosedLoopResult", "ClosedLoopSettings", "fly_closed_loop", "measured_state"]

@@ -124,10 +124,10 @@ from helireach_ros.core.failure_episode import (
     plan_lateness,
 )
 from helireach_ros.core.fallback import FallbackPlan, fallback_plan
+from helireach_ros.core.landing_supervisor import plan_time_remaining, replanning_ends
 from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict, solve_with_cold_check
 from helireach_ros.core.model import clip_rotor_speed_noise
 from helireach_ros.core.plan_verdict import plan_verdict
-from helireach_ros.core.replanning import plan_time_remaining, replanning_ends
 from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 from helireach_ros.core.units import FT, KT
 from helireach_ros.core.weight_tracking import (
