@@ -4,7 +4,7 @@ After the failure the planner plans from the measured state, then re-plans every
 from the current measurement, warm-started from its previous plan, until the vehicle is below
 ``min_height`` or the current plan has less than ``min_remaining`` to go — the policy of
 :class:`~helireach_ros.ros.nodes.planner_node.LandingPlannerNode`
-(:mod:`helireach_ros.core.replanning`). Each plan is indexed from the time of
+(:mod:`helireach_ros.core.landing_supervisor`). Each plan is indexed from the time of
 the measurement it starts from and reaches the vehicle ``latency`` seconds later (solve, transport),
 as a :class:`~helireach_ros.core.simulation.ControlSchedule`; until then the vehicle flies the previous one.
 

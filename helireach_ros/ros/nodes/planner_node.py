@@ -124,7 +124,16 @@ from helireach_ros.core.failure_episode import (
     plan_lateness,
 )
 from helireach_ros.core.fallback import FallbackPlan, fallback_plan
-from helireach_ros.core.landing_supervisor import plan_time_remaining, replanning_ends
+from helireach_ros.core.landing_supervisor import (
+    CurrentPlan,
+    ReplanGate,
+    TimerAction,
+    deadline_due,
+    fallback_after_failed_first_plan,
+    plan_time_remaining,
+    replan_gate,
+    replan_timer_action,
+)
 from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict, solve_with_cold_check
 from helireach_ros.core.model import clip_rotor_speed_noise
 from helireach_ros.core.plan_verdict import plan_verdict
@@ -821,6 +830,13 @@ class LandingPlannerNode(Node):
     def _standby_is_current(self, failure: FailureEpisode) -> bool:
         return failure.current is not None and self.is_standby(failure.current)
 
+    def _current_plan(self, failure: FailureEpisode) -> CurrentPlan:
+        if not failure.published or failure.current is None:
+            return CurrentPlan.NONE
+        if failure.current.fallback:
+            return CurrentPlan.FALLBACK
+        return CurrentPlan.STANDBY if self._standby_is_current(failure) else CurrentPlan.CONVERGED
+
     def _plan_initial(self, failure: FailureEpisode, retry: bool = False) -> None:
         """The first plan of a failure, warm-started from the envelope's nearest stored plan.
 
@@ -839,8 +855,12 @@ class LandingPlannerNode(Node):
         if plan is None or not plan.solver.success:
             reason = error or f"solver {plan.solver.status}"
             self.get_logger().error(f"failure #{failure.failure_id}: no converged plan ({reason})")
-            out = (retry and failure.published) or failure.has_plan_from(stamp_ns) or self._standby_is_current(failure)
-            if not out:  # a verified standby beats a fallback; one from a newer state is not followed by an older one
+            if fallback_after_failed_first_plan(
+                retry=retry,
+                any_published=failure.published,
+                has_plan_from_state=failure.has_plan_from(stamp_ns),
+                standby_current=self._standby_is_current(failure),
+            ):
                 self._publish_fallback(failure, state, stamp_ns, reason)
             return
         robust = self._robust is not None and plan.safe
@@ -889,9 +909,13 @@ class LandingPlannerNode(Node):
         self._publish_robust_verdicts()
         with self._lock:
             failure = self._failure
-            if failure is None or not failure.active or failure.published or failure.deadline_handled:
-                return
-            if self._now_ns() - failure.event_received_ns < self._deadline * 1e9:
+            if failure is None or not deadline_due(
+                failure_active=failure.active,
+                any_published=failure.published,
+                already_handled=failure.deadline_handled,
+                elapsed_s=(self._now_ns() - failure.event_received_ns) * 1e-9,
+                deadline_s=self._deadline,
+            ):
                 return
             failure.deadline_handled = True
         current = self.current_state()
@@ -904,15 +928,15 @@ class LandingPlannerNode(Node):
     def _on_replan_timer(self) -> None:
         with self._lock:
             failure = self._failure
-        if failure is None or not failure.active or self.planner is None:
+        if failure is None:
             return
-        if not failure.published or failure.current is None or failure.current.fallback:
-            self._submit(self._plan_initial, failure, True)  # still no converged plan for this failure: keep trying
-            return
-        if self._standby_is_current(failure):
-            self._submit(self._plan_initial, failure, True)  # the refined plan from the failure's state failed: again
-            return
-        self._submit(self._replan, failure)
+        action = replan_timer_action(
+            failure_active=failure.active, planner_ready=self.planner is not None, current=self._current_plan(failure)
+        )
+        if action is TimerAction.RETRY_FIRST_PLAN:
+            self._submit(self._plan_initial, failure, True)
+        elif action is TimerAction.REPLAN:
+            self._submit(self._replan, failure)
 
     def _replan(self, failure: FailureEpisode) -> None:
         """One closed-loop re-plan from the current state, warm-started from the current plan."""
@@ -922,7 +946,16 @@ class LandingPlannerNode(Node):
         if current is None:
             return
         state, stamp_ns, frame, rotor_source = current
-        if rotor_source != "measured":  # re-planning from an assumed rotor speed could be worse than the current plan
+        previous = failure.current
+        remaining = plan_time_remaining(previous.plan.time_to_land, (stamp_ns - previous.stamp_ns) * 1e-9)
+        gate = replan_gate(
+            rotor_measured=rotor_source == "measured",
+            height=state[3],
+            time_remaining=remaining,
+            min_height=self._replan_min_height,
+            min_remaining=self._replan_min_remaining,
+        )
+        if gate is ReplanGate.PAUSE_NO_ROTOR:
             failure.replans_skipped_no_rotor += 1
             self.get_logger().warning(
                 f"failure #{failure.failure_id}: re-planning paused: no measured rotor speed (the current plan is "
@@ -930,9 +963,7 @@ class LandingPlannerNode(Node):
                 throttle_duration_sec=1.0,
             )
             return
-        previous = failure.current
-        remaining = plan_time_remaining(previous.plan.time_to_land, (stamp_ns - previous.stamp_ns) * 1e-9)
-        if replanning_ends(state[3], remaining, self._replan_min_height, self._replan_min_remaining):
+        if gate is ReplanGate.END_CLOSED_LOOP:
             failure.active = False
             self.get_logger().info(
                 f"failure #{failure.failure_id}: closed loop ends at {state[3]:.2f} m, {remaining:.2f} s to go "
