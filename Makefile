@@ -22,16 +22,19 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench
+	$(BIN)/mypy
 	$(BIN)/python -m pytest -q --durations=25 test
 
 # The inner loop: lint and every test but those that start ROS systems, drive Chromium, compile code or fly many
 # closed loops (pytest markers; CI runs everything).
 test-fast: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench
+	$(BIN)/mypy
 	$(BIN)/python -m pytest -q -m "not (system or realtime or browser or build or slow)" test
 
 lint: $(STAMP)
 	$(BIN)/ruff check helireach_ros test bench
+	$(BIN)/mypy
 
 # Compiled NLP functions for the default airframe and settings (~10 s with gcc; optional: without them the
 # planner uses the plain CasADi functions, ~0.9x slower), and the block LDL^T linear solver (~1 s; a planner also

@@ -170,7 +170,7 @@ class Airframe:
 
     def with_conditions(self, gross_weight: float | None = None, density_altitude: float | None = None) -> Airframe:
         """Returns a copy at another gross weight (N) and/or density altitude (m)."""
-        changes: dict[str, float] = {}
+        changes: dict[str, Any] = {}
         if gross_weight is not None:
             _check_range("gross_weight", gross_weight, 1.0, 1e7, "N")
             changes["gross_weight"] = float(gross_weight)

@@ -105,7 +105,7 @@ def _build(hint: Any, prefix: str, arrays: Any) -> Any:
         if not optional:
             raise ValueError(f"{prefix}: None where a value is required")
         return None
-    if dataclasses.is_dataclass(hint):
+    if isinstance(hint, type) and dataclasses.is_dataclass(hint):
         hints = _type_hints(hint)
         values = {
             field.name: _build(hints[field.name], f"{prefix}.{field.name}" if prefix else field.name, arrays)

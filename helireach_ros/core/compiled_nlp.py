@@ -124,7 +124,7 @@ def nlp_key(nlp: dict, settings: CodegenSettings) -> str:
     """SHA-256 of the NLP (f, g of x and p), the CasADi version, the compiler and its flags."""
     function = ca.Function("landing_nlp", [nlp["x"], nlp["p"]], [nlp["f"], nlp["g"]])
     digest = hashlib.sha256()
-    for part in (function.serialize(), ca.__version__, settings.compiler, *settings.flags):
+    for part in (function.serialize(), ca.CasadiMeta.version(), settings.compiler, *settings.flags):
         digest.update(part.encode())
         digest.update(b"\0")
     return digest.hexdigest()

@@ -49,6 +49,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import TypeGuard
 
 from helireach_ros.core.units import FT, KT
 
@@ -211,7 +212,9 @@ class TouchdownFromState:
         self, height: float | None, climb_rate: float | None, forward_speed: float | None, now_s: float
     ) -> None:
         """Feeds one state (m, m/s, m/s) received at ``now_s`` (s); non-finite values are skipped."""
-        if self._result is not None or not all(_is_finite(x) for x in (height, climb_rate, forward_speed)):
+        if self._result is not None or not (
+            _is_finite(height) and _is_finite(climb_rate) and _is_finite(forward_speed)
+        ):
             return
         if height > self._contact_height:
             self._airborne = True
@@ -440,5 +443,6 @@ def next_cue(events: Sequence[CueEvent], elapsed_s: float | None, settings: CueS
     return event.kind if ahead < settings.now_s else f"{event.kind} IN {math.ceil(ahead)} s"
 
 
-def _is_finite(value: object) -> bool:
+def _is_finite(value: object) -> TypeGuard[float]:
+    """A finite number (not a bool, not None)."""
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)

@@ -315,11 +315,12 @@ class LandingPlanner:
         disturbance = _checked_disturbance(disturbance)
         transcription = self.transcription
         stored_controls = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
-        if stored_controls is not None:
-            warm_start = None  # rebuilt below, once the delay has not decided the landing without the NLP
-        if warm_start is not None and (
-            warm_start.primal.shape != transcription.lbx.shape
-            or warm_start.constraint_multipliers.shape != transcription.lbg.shape
+        # a stored control function is rebuilt into a solver warm start below, once the delay has not decided the
+        # landing without the NLP
+        solver_warm_start = None if isinstance(warm_start, ControlFunctionWarmStart) else warm_start
+        if solver_warm_start is not None and (
+            solver_warm_start.primal.shape != transcription.lbx.shape
+            or solver_warm_start.constraint_multipliers.shape != transcription.lbg.shape
         ):
             raise ValueError("warm start comes from another NLP (different method or resolution)")
         delay = self.settings.reaction_delay_s if reaction_delay_s is None else float(reaction_delay_s)
@@ -330,11 +331,11 @@ class LandingPlanner:
         else:
             start, outcome = initial, GROUND_AT_FAILURE if self._touches_down_outside_limits(initial) else ""
         if stored_controls is not None and not outcome:
-            warm_start = self._rebuilt_warm_start(stored_controls)
+            solver_warm_start = self._rebuilt_warm_start(stored_controls)
         if outcome:
-            decoded, solver_stats, warm = self._without_nlp(initial, start, control, delay, outcome, warm_start)
+            decoded, solver_stats, warm = self._without_nlp(initial, start, control, delay, outcome, solver_warm_start)
         else:
-            decoded, solver_stats, warm = self._solve(np.concatenate([start, control, disturbance]), warm_start)
+            decoded, solver_stats, warm = self._solve(np.concatenate([start, control, disturbance]), solver_warm_start)
             if delay > 0.0:
                 decoded = _with_delay(decoded, initial, control, delay)
         decided_by_replay = solver_stats.status in DECIDED_WITHOUT_NLP  # its value is the replay's

@@ -145,6 +145,7 @@ class RobustVerdict:
         if not self.closed_loop:
             return "no perturbed model was flown"
         first = self.first_failure
+        assert first is not None  # not robust, safe nominally and flown: a model failed
         flown = (
             f"{len(self.closed_loop)}"
             if not self.stopped_early

@@ -98,17 +98,18 @@ class PlannerSettings:
             problems.append(f"method must be one of {METHODS}, got {self.method!r}")
         if self.objective not in OBJECTIVES:
             problems.append(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
-        for name, low, high in (
+        integer_ranges: tuple[tuple[str, int, int], ...] = (
             ("intervals", 1, 1000),
             ("degree", 1, 9),
             ("paper_points", 3, 200),
             ("max_iterations", 1, 100000),
             ("replay_samples_per_interval", 1, 1000),
-        ):
+        )
+        for name, low, high in integer_ranges:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
                 problems.append(f"{name} must be an integer in [{low}, {high}], got {value!r}")
-        for name, low, high in (
+        real_ranges: tuple[tuple[str, float, float], ...] = (
             ("final_interval_ratio", 0.01, 100.0),
             ("min_time_to_land", 0.01, 10.0),
             ("max_time_to_land", 1.0, 600.0),
@@ -121,10 +122,11 @@ class PlannerSettings:
             ("rotor_speed_backoff", 0.0, 0.1),
             ("rotor_speed_replay_margin", 0.0, 0.1),
             ("reaction_delay_s", 0.0, 10.0),
-        ):
+        )
+        for name, real_low, real_high in real_ranges:
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float) or not low <= value <= high:
-                problems.append(f"{name} must be a number in [{low:g}, {high:g}], got {value!r}")
+            if isinstance(value, bool) or not isinstance(value, int | float) or not real_low <= value <= real_high:
+                problems.append(f"{name} must be a number in [{real_low:g}, {real_high:g}], got {value!r}")
         if not isinstance(self.closed_form_states, bool):
             problems.append(f"closed_form_states must be true or false, got {self.closed_form_states!r}")
         if not problems and self.min_time_to_land >= self.max_time_to_land:

@@ -258,9 +258,10 @@ class SolverPool:
         weight = self.airframe.gross_weight if gross_weight is None else float(gross_weight)
         disturbance = None if disturbance is None else np.asarray(disturbance, dtype=float).reshape(-1)
         stored = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
+        solver_warm_start = None if isinstance(warm_start, ControlFunctionWarmStart) else warm_start
         request = _SolveRequest(
-            np.asarray(state, dtype=float).reshape(-1), None if stored else warm_start, cold_check, control, delay,
-            weight, disturbance, stored,
+            np.asarray(state, dtype=float).reshape(-1), solver_warm_start, cold_check, control, delay, weight,
+            disturbance, stored,
         )  # fmt: skip
         payload = encode_dataclass(request)
         job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority, gross_weight=weight)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -147,7 +148,7 @@ def segment_integrator(airframe: Airframe, samples: int, relative_tolerance: flo
     control = parameters[0:2] + sigma * (parameters[2:4] - parameters[0:2])
     ode = parameters[4] * disturbed_dynamics_function(airframe)(state, control, parameters[5:8])
     grid = np.linspace(0.0, 1.0, samples + 1)[1:]
-    options = {
+    options: dict[str, Any] = {
         "reltol": relative_tolerance,
         "abstol": relative_tolerance * 1e-2,
         "max_num_steps": 100000,

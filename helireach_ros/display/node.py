@@ -180,7 +180,7 @@ class CockpitDisplay(Node):
         self._envelope = envelope
         # one safe mask per climb slice (a 2-D envelope has one): margins come from the measured climb rate's
         # nearest slice, the drawn diagram is the level-flight slice
-        self._envelope_safe = None
+        self._envelope_safe: np.ndarray | None = None
         if envelope is not None:
             safe = np.asarray(envelope.status) == "safe"
             self._envelope_safe = safe if envelope.is_3d else safe[None]
@@ -383,6 +383,7 @@ class CockpitDisplay(Node):
         margins = None
         if self._envelope is not None and content["height_m"] is not None and content["speed_ms"] is not None:
             climb = content["climb_ms"] if content["climb_ms"] is not None else 0.0
+            assert self._envelope_safe is not None  # set with the envelope
             safe = self._envelope_safe[self._envelope.nearest_slice(climb)]
             # judged as on the ground below 0 m, as the status node does
             height = max(content["height_m"], 0.0)
@@ -455,7 +456,7 @@ class CockpitDisplay(Node):
 
     def _on_trajectory(self, message: JointTrajectory) -> None:
         section = trajectory_section(message)
-        events = ()
+        events: tuple[CueEvent, ...] = ()
         if "error" not in section:
             events = plan_cue_events(section["t_s"], section["collective"], section["pitch_rad"])
         now_ros = self.get_clock().now().nanoseconds * 1e-9

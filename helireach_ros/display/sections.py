@@ -152,12 +152,12 @@ def boundary_segments(
         point = (float(height), float(speed))
         spans_v = np.flatnonzero((speeds[:-1] - tolerance_v <= speed) & (speed <= speeds[1:] + tolerance_v))
         spans_h = np.flatnonzero((heights[:-1] - tolerance_h <= height) & (height <= heights[1:] + tolerance_h))
-        for row in np.flatnonzero(np.abs(heights - height) <= tolerance_h):
-            for column in spans_v:
-                on_edge.setdefault(("h", int(row), int(column)), []).append(point)
-        for column in np.flatnonzero(np.abs(speeds - speed) <= tolerance_v):
-            for row in spans_h:
-                on_edge.setdefault(("v", int(row), int(column)), []).append(point)
+        for edge_row in np.flatnonzero(np.abs(heights - height) <= tolerance_h):
+            for edge_column in spans_v:
+                on_edge.setdefault(("h", int(edge_row), int(edge_column)), []).append(point)
+        for edge_column in np.flatnonzero(np.abs(speeds - speed) <= tolerance_v):
+            for edge_row in spans_h:
+                on_edge.setdefault(("v", int(edge_row), int(edge_column)), []).append(point)
 
     def crossing(kind: str, row: int, column: int) -> tuple[float, float] | None:
         candidates = on_edge.get((kind, row, column))
@@ -179,8 +179,8 @@ def boundary_segments(
                 ("h", row + 1, column, safe[row + 1, column] != safe[row + 1, column + 1]),
                 ("v", row, column, safe[row, column] != safe[row + 1, column]),
             )  # counter-clockwise: bottom, right, top, left
-            points = [crossing(kind, r, c) for kind, r, c, changes in edges if changes]
-            points = [point for point in points if point is not None]
+            crossings = [crossing(kind, r, c) for kind, r, c, changes in edges if changes]
+            points = [point for point in crossings if point is not None]
             if len(points) == 2:
                 segments.append((*points[0], *points[1]))
             elif len(points) == 4:  # saddle: cut off the safe corners (never join them across the cell)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import threading
 
+from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -25,9 +26,9 @@ class AddedOrderExecutor(SingleThreadedExecutor):
     # rclpy's Executor.__del__ reads this even when __init__ stopped before setting it (a stop signal that shuts the
     # context down while the executor is built makes its guard condition raise): without the default it printed an
     # "Exception ignored ... AttributeError" traceback on such a stop.
-    _sigint_gc = None
+    _sigint_gc = None  # type: ignore[assignment]  # rclpy's attribute, absent until its __init__ sets it
 
-    def __init__(self, *, context: object | None = None) -> None:
+    def __init__(self, *, context: Context | None = None) -> None:
         self._added: list[Node] = []
         self._added_lock = threading.RLock()  # re-entered: add_node sets node.executor, which calls add_node
         super().__init__(context=context)

@@ -229,10 +229,9 @@ class HelireachSystem:
         self.shutdown()
 
 
-def _recorder_metadata(system_nodes: Mapping[str, Node | None], command: str) -> dict[str, str]:
-    planner = system_nodes["planner"]
-    status = system_nodes["envelope_status"]
-    sim = system_nodes.get("sim")
+def _recorder_metadata(
+    planner: LandingPlannerNode, status: EnvelopeStatusNode, sim: SimVehicleNode | None, command: str
+) -> dict[str, str]:
     metadata = {
         "software_version": __version__,
         "command": command,
@@ -314,7 +313,7 @@ def build_system(
         created.append(readiness)
         if recorder is not None:
             recorder.update_metadata(
-                _recorder_metadata({"planner": planner, "envelope_status": envelope_status, "sim": sim}, command)
+                _recorder_metadata(planner, envelope_status, sim, command)
             )
             # Nothing spins yet: every message the vehicle publishes from the first on is recorded.
             recorder.wait_until_recording(_RECORDER_MATCH_TIMEOUT_S)

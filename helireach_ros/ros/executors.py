@@ -98,7 +98,9 @@ def _one_line(error: BaseException) -> str:
     return str(error).split(", at /")[0].replace("failed to initialize rcl: ", "").strip()
 
 
-def node_command_line(node_class: type, args: list[str] | None = None) -> tuple[list[str], str, int | None]:
+def node_command_line(
+    node_class: Callable[..., Any], args: list[str] | None = None
+) -> tuple[list[str], str, int | None]:
     """What a node script does before ``rclpy.init``: answer ``--help``, refuse a bad command line.
 
     Args:

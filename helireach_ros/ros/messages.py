@@ -153,9 +153,11 @@ matches reliable and best-effort, volatile and transient-local publishers alike 
 # one is a waitable the executor re-adds to its wait set on every wait, which in a composed process with a
 # 25 Hz vehicle doubled the CPU time of the demo. The helireach nodes register only the incompatible-QoS
 # callback, on their inputs and own outputs (helireach_ros.ros.qos.QosWatch); other endpoints use these.
-NO_QOS_EVENTS_PUBLISHER = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
+NO_QOS_EVENTS_PUBLISHER: dict[str, Any] = {"event_callbacks": PublisherEventCallbacks(use_default_callbacks=False)}
 """``create_publisher`` keyword arguments: no QoS-event handler."""
-NO_QOS_EVENTS_SUBSCRIPTION = {"event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)}
+NO_QOS_EVENTS_SUBSCRIPTION: dict[str, Any] = {
+    "event_callbacks": SubscriptionEventCallbacks(use_default_callbacks=False)
+}
 """``create_subscription`` keyword arguments: no QoS-event handler."""
 
 

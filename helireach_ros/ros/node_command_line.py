@@ -19,7 +19,7 @@ import ast
 import inspect
 import math
 import textwrap
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -166,7 +166,9 @@ def _evaluator(function_node: ast.AST, namespace: dict[str, Any]) -> Any:
     """Evaluates expressions of a function body in its module's namespace plus the simple local constants
     assigned before its last declaration (``defaults = rm.StateLimits()``); whatever needs ``self``, a
     declared value or anything else unavailable stays source text."""
-    last_declaration = max((node.lineno for node in ast.walk(function_node) if _is_declare_call(node)), default=0)
+    last_declaration = max(
+        (getattr(node, "lineno", 0) for node in ast.walk(function_node) if _is_declare_call(node)), default=0
+    )
     local: dict[str, Any] = {}
     for statement in sorted(
         (node for node in ast.walk(function_node) if isinstance(node, ast.Assign)), key=lambda node: node.lineno
@@ -224,14 +226,14 @@ def _specs_in(function: Any) -> list[ParameterSpec]:
     return specs
 
 
-def parameter_specs(node_class: type) -> list[ParameterSpec]:
+def parameter_specs(node_class: Callable[..., Any]) -> list[ParameterSpec]:
     """The parameters ``node_class.__init__`` declares, in source order (see the module docstring)."""
-    return _specs_in(node_class.__init__)
+    return _specs_in(getattr(node_class, "__init__"))  # noqa: B009  # the class's, not an instance's
 
 
-def node_name_of(node_class: type) -> str:
+def node_name_of(node_class: Callable[..., Any]) -> str:
     """The node name ``node_class.__init__`` passes to ``super().__init__`` (the class name if none is found)."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(node_class.__init__)))
+    tree = ast.parse(textwrap.dedent(inspect.getsource(getattr(node_class, "__init__"))))  # noqa: B009
     for call in ast.walk(tree):
         if (
             isinstance(call, ast.Call)
@@ -256,7 +258,7 @@ def _format_value(value: Any) -> str:
     return repr(value)
 
 
-def node_usage(script: str, node_name: str, node_class: type) -> str:
+def node_usage(script: str, node_name: str, node_class: Callable[..., Any]) -> str:
     """The ``--help`` text of a node console script."""
     summary = (inspect.getdoc(node_class) or "").split("\n\n")[0].replace("\n", " ")
     specs = parameter_specs(node_class)

@@ -103,8 +103,8 @@ def checked_override(
         if isinstance(value, str | bool | int | float) or Parameter.Type.from_parameter_value(
             list(value)
         ) != Parameter.Type.from_parameter_value(list(default)):
-            element_type = type(default[0]) if default else None
-            elements = {bool: "bools", int: "integers", float: "floats", str: "strings"}.get(element_type, "values")
+            element_names: dict[type, str] = {bool: "bools", int: "integers", float: "floats", str: "strings"}
+            elements = element_names.get(type(default[0]), "values") if default else "values"
             raise ParameterError(f"{given}: {wanted} of {elements} (non-empty)")
         return value
     if type(value) is not type(default):
@@ -166,9 +166,11 @@ def declare_checked_parameter(
     if nan_default and not read_only:
         raise TypeError(f"parameter {name!r}: a NaN default with a range must be read-only")
     descriptor = ParameterDescriptor(description=description, read_only=read_only)
-    if numeric and isinstance(default, int):
+    if value_range is None:
+        pass  # not numeric: no range (checked above)
+    elif isinstance(default, int):
         descriptor.integer_range = [IntegerRange(from_value=int(value_range[0]), to_value=int(value_range[1]), step=1)]
-    elif numeric and not nan_default:
+    elif not nan_default:
         descriptor.floating_point_range = [
             FloatingPointRange(from_value=float(value_range[0]), to_value=float(value_range[1]))
         ]

@@ -167,8 +167,8 @@ def compare_logged_plans(
         state = np.array([float(values[key]) for key in _STATE_KEYS])
         stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope is not None else None
         # the control flown at the plan's start and its reaction delay, as logged (older logs: the defaults)
-        logged_control = [values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")]
-        control = None if None in logged_control else np.array([float(value) for value in logged_control])
+        thrust, pitch = values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")
+        control = None if thrust is None or pitch is None else np.array([float(thrust), float(pitch)])
         delay = float(values["reaction_delay_s"]) if "reaction_delay_s" in values else None
         # the weight the plan was made for (the planner node's estimate; older logs: the airframe's)
         weight = float(values.get("planned_gross_weight_n", airframe.gross_weight))

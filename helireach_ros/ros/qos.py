@@ -155,10 +155,11 @@ def drop_parameter_event_handlers(node: Node) -> int:
     for publisher in list(node.publishers):
         if publisher.topic_name != "/parameter_events" or not publisher.event_handlers:
             continue
-        for handler in publisher.event_handlers:
+        handlers: list[Any] = list(publisher.event_handlers)  # type: ignore[call-overload]  # a list, typed as one
+        for handler in handlers:
             node.remove_waitable(handler)
             handler.destroy()
             removed += 1
-        publisher.event_handlers = []  # destroy_publisher() removes and destroys what is left in it
+        publisher.event_handlers = []  # type: ignore[assignment]  # destroy_publisher() destroys what is left
     return removed
 

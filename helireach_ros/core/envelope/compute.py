@@ -242,6 +242,8 @@ def _warm_start_of(solution: _Solution):
 
     if solution.primal is None or solution.status in (_FAILED, _NO_TRIM):
         return None
+    # a solution with a primal has its multipliers (the solver returns all three together)
+    assert solution.bound_multipliers is not None and solution.constraint_multipliers is not None
     return WarmStart(
         solution.primal.astype(float),
         solution.bound_multipliers.astype(float),
@@ -655,7 +657,8 @@ class _EnvelopeState:
         state.cold_checked = arrays["cold_checked"].copy()
         state.disagree = arrays["warm_cold_disagree"].copy()
         for index, edge in enumerate(arrays["boundary_edge"].tolist()):
-            key = tuple(int(e) for e in edge)
+            slice_index, row, column, side = (int(e) for e in edge)
+            key = (slice_index, row, column, side)
             state.boundary[key] = _BoundaryPoint(
                 key, tuple(arrays["boundary"][index].tolist()), tuple(arrays["boundary_unsafe_side"][index].tolist()),
                 0, 0,
@@ -738,7 +741,7 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
             # requested: a worker without a C compiler solves with MUMPS (the answers agree;
             # docs/decisions/block-ldl.md)
             "linear_solver": (job.codegen or CodegenSettings.from_environment()).linear_solver,
-            "casadi": casadi.__version__,
+            "casadi": casadi.CasadiMeta.version(),
             "numpy": np.__version__,
             "python": platform.python_version(),
         },
@@ -753,10 +756,11 @@ def _check_resumable(job: EnvelopeJob, envelope: Envelope, path: Path) -> None:
         raise EnvelopeError(f"{where} has another height grid than requested")
     if envelope.speeds.shape != (len(job.speeds),) or not np.allclose(envelope.speeds, job.speeds, atol=1e-9):
         raise EnvelopeError(f"{where} has another speed grid than requested")
-    stored = envelope.climb_rates
-    if (stored is None) != (job.climb_rates is None) or (
+    stored, requested = envelope.climb_rates, job.climb_rates
+    if (stored is None) != (requested is None) or (
         stored is not None
-        and (stored.shape != (len(job.climb_rates),) or not np.allclose(stored, job.climb_rates, atol=1e-9))
+        and requested is not None
+        and (stored.shape != (len(requested),) or not np.allclose(stored, requested, atol=1e-9))
     ):
         raise EnvelopeError(f"{where} has another climb-rate axis than requested")
 

@@ -368,7 +368,9 @@ class Envelope:
     def _margins(self, safe: np.ndarray) -> dict[tuple[int, ...], _MarginGeometry]:
         """Margin geometry per enclosing set of slices; between two slices the combined one (safe where both are)."""
         heights_ft, speeds_kt = self.heights / FT, self.speeds / KT
-        geometry = {(k,): _MarginGeometry(heights_ft, speeds_kt, safe[k]) for k in range(safe.shape[0])}
+        geometry: dict[tuple[int, ...], _MarginGeometry] = {
+            (k,): _MarginGeometry(heights_ft, speeds_kt, safe[k]) for k in range(safe.shape[0])
+        }
         geometry.update(
             {
                 (k, k + 1): _MarginGeometry(heights_ft, speeds_kt, safe[k] & safe[k + 1])
@@ -505,6 +507,11 @@ class Envelope:
         return self._arrays["climb_rates"] if self.is_3d else None
 
     @property
+    def _slice_climb_rates(self) -> np.ndarray:
+        """The climb rate of every slice, m/s: a 2-D envelope's one slice is level flight."""
+        return self._arrays["climb_rates"] if self.is_3d else np.zeros(1)
+
+    @property
     def validity_domain(self) -> ValidityDomain:
         """Where the envelope's answers hold (its climb rates are the file's climb axis in a 3-D envelope)."""
         return self._domain
@@ -565,7 +572,7 @@ class Envelope:
         climb_rate = _as_float(climb_rate)
         if not math.isfinite(climb_rate):
             raise ValueError(f"climb rate must be a finite number, got {climb_rate!r}")
-        return int(np.argmin(np.abs(self.climb_rates - climb_rate))) if self.is_3d else 0
+        return int(np.argmin(np.abs(self._slice_climb_rates - climb_rate)))
 
     def slice(self, index: int) -> Envelope:
         """The 2-D envelope of one climb slice (a 2-D envelope returns itself).
@@ -575,11 +582,11 @@ class Envelope:
         """
         if not self.is_3d:
             return self
-        count = self.climb_rates.size
+        count = self._slice_climb_rates.size
         if not -count <= index < count:
             raise IndexError(f"climb slice {index} of an envelope with {count}")
         index %= count
-        climb_rate = float(self.climb_rates[index])
+        climb_rate = float(self._slice_climb_rates[index])
         arrays = {
             name: array if _is_axis_or_boundary(name) else array[index]  # every other array is per node
             for name, array in self._arrays.items()
@@ -608,7 +615,7 @@ class Envelope:
             return None
         if self._stacked["status_code"].shape[0] == 1:
             return [0]  # one slice: it speaks for its tolerance band
-        return _enclosing_nodes(self.climb_rates, climb_rate)
+        return _enclosing_nodes(self._slice_climb_rates, climb_rate)
 
     def query(
         self, height_m: float, speed_ms: float, climb_rate: float = 0.0, verdict: str = "nominal"
@@ -677,7 +684,7 @@ class Envelope:
         usable = self._usable_plans
         if not np.any(usable):
             return None
-        climbs = self.climb_rates if self.is_3d else np.zeros(1)
+        climbs = self._slice_climb_rates
         climb_rate = climb_rate if math.isfinite(climb_rate) else 0.0
         distance = np.sqrt(
             ((climbs[:, None, None] - climb_rate) / KT) ** 2
@@ -722,7 +729,7 @@ class Envelope:
             control_times=control_times,
             control_values=control_values,
             control_interpolation=str(self._metadata.get("control_interpolation", "zero_order_hold")),
-            climb_rate=float(self.climb_rates[climb_index]) if self.is_3d else 0.0,
+            climb_rate=float(self._slice_climb_rates[climb_index]),
         )
 
     def check_matches(
@@ -754,7 +761,7 @@ class Envelope:
 
     def __repr__(self) -> str:
         counts = {name: int(np.sum(self.status == name)) for name in STATUS_CODES}
-        climbs = f"{self.climb_rates.size}x" if self.is_3d else ""
+        climbs = f"{self._slice_climb_rates.size}x" if self.is_3d else ""
         return (
             f"Envelope({self.airframe_name}, {climbs}{self.heights.size}x{self.speeds.size}, power_fraction="
             f"{self.power_fraction:g}, {counts}, id={self.envelope_id})"
@@ -950,8 +957,10 @@ def _cached_solver_state(checksum: str) -> dict[str, np.ndarray] | None:
     except Exception as error:  # a cache file is a convenience: anything wrong with it means "not cached"
         log.warning("ignoring the cached solver state %s: %s: %s", path, type(error).__name__, error)
         return None
-    if owner != checksum.encode() or _content_checksum(contents, owner) != stored or set(contents) != set(
-        SOLVER_STATE_ARRAYS
+    if (
+        owner != checksum.encode()
+        or _content_checksum(contents, owner) != stored
+        or set(contents) != set(SOLVER_STATE_ARRAYS)
     ):
         log.warning("ignoring the cached solver state %s: it is not this envelope's, or it is corrupt", path)
         return None
@@ -963,7 +972,7 @@ def _write_npz(target: Path, payload: dict[str, np.ndarray]) -> Path:
     temporary = target.with_name(f".{target.name}.{os.getpid()}.tmp")
     try:
         with open(temporary, "wb") as handle:
-            np.savez_compressed(handle, **payload)
+            np.savez_compressed(handle, **payload)  # type: ignore[arg-type]  # numpy's stub types **kwds as its flag
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(temporary, target)

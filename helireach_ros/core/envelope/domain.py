@@ -89,14 +89,13 @@ class ValidityDomain:
         recorded = metadata.get("validity_domain")
         if not isinstance(recorded, Mapping):
             return cls()
-        known = {
-            name: recorded[name]
-            for name in ("climb_rate_tolerance", "rotor_speed_tolerance", "power_tolerance")
-            if name in recorded
-        }
-        if "climb_rates" in recorded:
-            known["climb_rates"] = tuple(float(rate) for rate in recorded["climb_rates"])
-        return cls(**{name: value if name == "climb_rates" else float(value) for name, value in known.items()})
+        default = cls()
+        return cls(
+            climb_rate_tolerance=float(recorded.get("climb_rate_tolerance", default.climb_rate_tolerance)),
+            rotor_speed_tolerance=float(recorded.get("rotor_speed_tolerance", default.rotor_speed_tolerance)),
+            power_tolerance=float(recorded.get("power_tolerance", default.power_tolerance)),
+            climb_rates=tuple(float(rate) for rate in recorded.get("climb_rates", default.climb_rates)),
+        )
 
     def to_metadata(self) -> dict[str, Any]:
         """JSON-ready, for the envelope file."""

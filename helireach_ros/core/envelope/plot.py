@@ -269,7 +269,7 @@ def _save(figure: Figure, out_path: str | os.PathLike[str]) -> pathlib.Path:
 
 def _footer(envelope: Envelope, figure: Figure, start: str) -> None:
     grid = f"{envelope.heights.size} x {envelope.speeds.size} nodes"
-    if envelope.is_3d:
+    if envelope.climb_rates is not None:
         grid = f"{envelope.climb_rates.size} x {grid}"
     flight = "steady flight at each climb rate" if envelope.is_3d or _climb_text(envelope) else "level trim"
     figure.text(
@@ -351,7 +351,7 @@ def all_slices_figure(envelope: Envelope, title_extra: str | None = None) -> Fig
     Raises:
         ValueError: a 2-D envelope.
     """
-    if not envelope.is_3d:
+    if envelope.climb_rates is None:
         raise ValueError("a 2-D envelope has one slice: use plot_envelope")
     count = envelope.climb_rates.size
     columns = min(count, 4)

@@ -171,7 +171,7 @@ def add_robust_verdicts(
     progress = progress or NullProgress()
     arrays = envelope.arrays
     shape = arrays["status_code"].shape
-    climbs = envelope.climb_rates if envelope.is_3d else np.zeros(1)
+    climbs = envelope.climb_rates if envelope.climb_rates is not None else np.zeros(1)
     level = [index for index, climb in enumerate(climbs) if abs(float(climb)) <= LEVEL_TOLERANCE]
     codes = np.full(shape, ROBUST_CODES["not_computed"], np.int8)
     flown, landed, open_landed = (np.zeros(shape, np.int16) for _ in range(3))

@@ -257,7 +257,7 @@ def _read_overview(log_path: Path, allow_truncated: bool) -> LogOverview:
                     counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
                     first, last = span or (record.log_time, record.log_time)
                     span = (min(first, record.log_time), max(last, record.log_time))
-            channels = channel_list
+            channels = channel_list  # type: ignore[assignment]  # iterated only: values or list alike
         topics: dict[str, LoggedTopic] = {}
         for channel in channels:
             info = _channel_info(log_path, channel, schemas.get(channel.schema_id))

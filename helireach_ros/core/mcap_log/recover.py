@@ -286,9 +286,9 @@ def recover_log(
                 type_hash=channel.metadata.get("topic_type_hash", ""),
             )
         for message in messages:
-            channel = kept.get(message.channel_id)
-            if channel is not None:
-                writer.write(channel.topic, message.data, message.log_time, message.publish_time)
+            kept_channel = kept.get(message.channel_id)
+            if kept_channel is not None:
+                writer.write(kept_channel.topic, message.data, message.log_time, message.publish_time)
                 count += 1
     recovered = [m for m in messages if m.channel_id in kept]
     return RecoveryReport(

@@ -35,11 +35,12 @@ SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
 PARAMETER_SIZE = 11  # (y, v, Ω, h, z, P) at the start, the controls (C_T, θ) being flown then, the disturbance d
 
 
-def terminal_cost(airframe: Airframe, state) -> float:
-    """The normalised landing cost J of a state (≤ 0 is a safe touchdown); numpy, vectorised on columns."""
+def terminal_cost(airframe: Airframe, state) -> np.ndarray:
+    """The normalised landing cost J of a state (≤ 0 is a safe touchdown); numpy, vectorised on columns (a 0-d
+    array for one state: ``float()`` it)."""
     limits = airframe.limits
     state = np.asarray(state, dtype=float)
-    return (
+    return np.asarray(
         np.maximum.reduce(
             [
                 np.abs(state[0]) / limits.max_descent_rate,
@@ -87,6 +88,15 @@ class Transcription(ABC):
     :mod:`helireach_ros.core.compiled_nlp`; ``nlp_functions`` says which; with the block LDL^T as IPOPT's linear
     solver where it can be built, :mod:`helireach_ros.core.block_ldl`; ``linear_solver`` says which).
     """
+
+    # What a subclass's ``_build`` defines: the NLP and the bounds of its variables and constraints.
+    decision: ca.SX
+    objective: ca.SX
+    constraints: ca.SX
+    lbx: np.ndarray
+    ubx: np.ndarray
+    lbg: np.ndarray
+    ubg: np.ndarray
 
     def __init__(self, airframe: Airframe, settings: PlannerSettings, codegen: CodegenSettings | None = None) -> None:
         self.airframe = airframe

@@ -143,7 +143,7 @@ def evaluate_safety(
             state_problem = f"invalid state ({'; '.join(problems)})"
         height, forward_speed = max(reading.height, 0.0), reading.forward_speed
     evidence = None
-    if envelope is not None and not state_problem:
+    if envelope is not None and reading is not None and not state_problem:
         # a 3-D envelope answers at the measured climb rate; a 2-D one at level trim, its domain checks the rest
         climb_rate = reading.climb_rate if envelope.is_3d else 0.0
         query = envelope.query(height, forward_speed, climb_rate, envelope_verdict)
@@ -265,7 +265,7 @@ class EnvelopeStatusNode(Node):
         self._live: dict[str, str] | None = None  # the latest /helireach/live_reachability values
         self._episode = EpisodeState()
         self._plan: dict[str, str] | None = None  # the latest /helireach/plan_status values
-        self._last_published: tuple[bytes, str] | None = None
+        self._last_published: tuple[bytes, str, str] | None = None
         self._last_verdict: SafetyVerdict | None = None
         # Input problems other helireach nodes report: status name → (received ns, problems text).
         self._qos_reports: dict[str, tuple[int, str]] = {}

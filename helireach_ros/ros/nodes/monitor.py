@@ -246,7 +246,7 @@ class VehicleMonitor(Node):
         if transition is None:
             return
         state = transition.state
-        if transition.started:
+        if transition.started and state.started_ns is not None:
             with self._lock:
                 frame = self._vehicle_frame
             self._event_publisher.publish(Header(stamp=rm.stamp_message(state.started_ns), frame_id=frame))
@@ -286,17 +286,18 @@ class VehicleMonitor(Node):
         timeout_ns = self._stale_timeout * 1e9
         odometry_fresh = odometry_ns is not None and now_ns - odometry_ns <= timeout_ns
         rotor_fresh = rotor_ns is not None and now_ns - rotor_ns <= timeout_ns
-        recent_rejection = rejection is not None and now_ns - rejection[0] <= timeout_ns
+        rejection_text = rejection[1] if rejection is not None and now_ns - rejection[0] <= timeout_ns else ""
+        recent_rejection = bool(rejection_text)
         if not odometry_fresh:
             level, text = DiagnosticStatus.STALE, "no valid vehicle state"
         elif recent_rejection:
-            level, text = DiagnosticStatus.ERROR, rejection[1]
+            level, text = DiagnosticStatus.ERROR, rejection_text
         elif not rotor_fresh:
             level, text = DiagnosticStatus.WARN, "no valid rotor speed"
         else:
             level, text = DiagnosticStatus.OK, "vehicle state valid"
         if recent_rejection and level == DiagnosticStatus.STALE:
-            text = f"{text}; {rejection[1]}"
+            text = f"{text}; {rejection_text}"
         if level == DiagnosticStatus.OK and drop is not None and now_ns - drop[0] <= timeout_ns:
             level, text = DiagnosticStatus.WARN, drop[1]  # the state stays valid: the older message was not used
         flag_publishers = self.count_publishers(rm.TOPIC_ENGINE_FAILURE)

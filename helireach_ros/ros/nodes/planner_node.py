@@ -402,7 +402,7 @@ class LandingPlannerNode(Node):
                 else None
             )
             warm_up_started = time.perf_counter()
-            self.planner.plan(state, stored.warm_start if stored else None)
+            self.planner.plan(state.as_array(), stored.warm_start if stored else None)
             self.warm_up_ms = 1e3 * (time.perf_counter() - warm_up_started)
         self.startup_s = time.perf_counter() - started
         where = f"{solver_workers} solver workers" if self._pool is not None else "solving in this process"
@@ -562,11 +562,13 @@ class LandingPlannerNode(Node):
         with self._lock:
             self._episode = state
             failure = self._failure
-        if episode_starts(state, failure.event_stamp_ns if failure is not None else None):
+        if state.started_ns is not None and episode_starts(
+            state, failure.event_stamp_ns if failure is not None else None
+        ):
             self._start_failure(state.started_ns)
             return
         outcome = episode_outcome(state, failure.event_stamp_ns) if failure is not None else None
-        if outcome is not None:
+        if failure is not None and outcome is not None:
             self._stop_failure(failure, outcome, state)
 
     def _start_failure(self, failure_stamp_ns: int) -> None:
@@ -676,8 +678,9 @@ class LandingPlannerNode(Node):
             if not self._live.due(now_ns + self._live.settings.period_ns // 2):
                 return
             # The envelope's nearest plan (~2 ms in the 3-D file) only when no neighbouring live solution can start it.
-            needs_fallback = self.envelope is not None and not self._live.warm_start_applies(state)
-            stored = self.envelope.nearest_plan(state[3], state[1], -state[0]) if needs_fallback else None
+            envelope = self.envelope
+            needs_fallback = envelope is not None and not self._live.warm_start_applies(state)
+            stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope and needs_fallback else None
             prepared = self._live.prepare(state, stamp_ns, now_ns, stored.warm_start if stored is not None else None)
             if prepared is None:
                 return  # the state is older than live_max_state_age
@@ -754,6 +757,7 @@ class LandingPlannerNode(Node):
 
     def _live_status(self, verdict: LiveVerdict, standby: bool, weight: WeightChoice) -> DiagnosticStatus:
         """The ``/helireach/live_reachability`` message of a verdict (msg_docs/helireach_live_reachability.md)."""
+        assert self._live is not None  # verdicts come from the live evaluator
         plan = verdict.plan
         verified = plan is not None and plan.verified
         values = {
@@ -853,7 +857,7 @@ class LandingPlannerNode(Node):
         warm_start, source = (stored.warm_start, "envelope") if stored is not None else (None, "none")
         plan, error = self._solve(state, warm_start)
         if plan is None or not plan.solver.success:
-            reason = error or f"solver {plan.solver.status}"
+            reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self.get_logger().error(f"failure #{failure.failure_id}: no converged plan ({reason})")
             if fallback_after_failed_first_plan(
                 retry=retry,
@@ -947,6 +951,8 @@ class LandingPlannerNode(Node):
             return
         state, stamp_ns, frame, rotor_source = current
         previous = failure.current
+        if previous is None:  # the timer re-plans only once a converged plan is out
+            return
         remaining = plan_time_remaining(previous.plan.time_to_land, (stamp_ns - previous.stamp_ns) * 1e-9)
         gate = replan_gate(
             rotor_measured=rotor_source == "measured",
@@ -979,7 +985,7 @@ class LandingPlannerNode(Node):
         plan, error = self._solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
         if plan is None or not plan.solver.success:
             failure.replans_failed += 1
-            reason = error or f"solver {plan.solver.status}"
+            reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self.get_logger().warning(f"re-plan failed ({reason}); keeping the current plan", throttle_duration_sec=1.0)
             return
         failure.replans += 1
@@ -1147,7 +1153,7 @@ class LandingPlannerNode(Node):
                 "rotor_speed_source": rotor_source,
                 **self._common_values(failure, plan.initial_state, stamp_ns, weight),
             }
-            if robust_pending:
+            if robust_pending and self._robust is not None:
                 values.update(robust="pending", robust_design=self._robust.design)
             level_name, text = plan_verdict(plan, rotor_source)
             if standby:
@@ -1171,6 +1177,7 @@ class LandingPlannerNode(Node):
         weight = self.episode_weight.gross_weight
         model = self.airframe if weight == self.airframe.gross_weight else self.airframe.with_conditions(weight)
         key = (failure.failure_id, failure.event_stamp_ns, stamp_ns)
+        assert self._robust is not None  # called only with robust verification on
         self._robust.submit(key, model, self._robust_settings(), plan)
         self._publish_robust(key, None)
 
@@ -1190,8 +1197,9 @@ class LandingPlannerNode(Node):
             "failure_id": failure_id, "failure_stamp_ns": failure_stamp_ns, "state_stamp_ns": stamp_ns,
         }  # fmt: skip
         if summary is None:
-            level, text = DiagnosticStatus.STALE, f"PENDING: robust verification running ({self._robust.design})"
-            values.update(robust="pending", robust_design=self._robust.design)
+            design = self._robust.design if self._robust is not None else ""
+            level, text = DiagnosticStatus.STALE, f"PENDING: robust verification running ({design})"
+            values.update(robust="pending", robust_design=design)
         else:
             values.update(summary.values())
             if summary.robust:
