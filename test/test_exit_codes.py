@@ -58,7 +58,7 @@ def test_node_help_prints_usage_with_parameters_and_exits_0(script, isolated_ros
 def test_monitor_help_lists_each_parameter_with_range_default_and_description(isolated_ros):
     text = run("helireach_monitor", "-h").stdout
     assert "  stale_timeout (float in [0.01, 60], default 0.5)\n      no valid state for this long = STALE, s" in text
-    assert "  min_height (float in [-100, 0], default -1.0)" in text  # a default taken from rm.StateLimits()
+    assert "  min_height (float in [-100, 0], default -1.0)" in text  # a default taken from StateLimits()
 
 
 @pytest.mark.parametrize(

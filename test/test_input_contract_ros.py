@@ -21,6 +21,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.vehicle_readings import OdometryReading
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode, evaluate_safety
 from helireach_ros.ros.nodes.monitor import VehicleMonitor
@@ -211,7 +212,7 @@ def test_out_of_order_stamps_are_dropped_counted_and_the_state_never_goes_backwa
 def test_input_problems_override_a_safe_envelope_answer() -> None:
     """The pure verdict: never SAFE with an input problem; the envelope's answer is kept in the text and values."""
     envelope = load_envelope(default_envelope_path())
-    reading = rm.OdometryReading(0, 500 * FT, 0.0, 75 * KT, 0.0)
+    reading = OdometryReading(0, 500 * FT, 0.0, 75 * KT, 0.0)
     omega = float(envelope.metadata["airframe"]["nominal_rotor_speed"])  # measured: the envelope's domain
     safe = evaluate_safety(envelope, reading, 0.0, 0.5, 20.0, rotor_speed=omega)
     assert safe.level == DiagnosticStatus.OK

@@ -18,6 +18,13 @@ from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import LandingPlanner
 from helireach_ros.core.settings import load_settings
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.vehicle_readings import (
+    OdometryReading,
+    RotorReading,
+    StateLimits,
+    helicopter_state,
+    state_problems,
+)
 from helireach_ros.ros import messages as rm
 
 MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"
@@ -26,10 +33,10 @@ MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"
 def test_odometry_round_trip_in_rep103_conventions() -> None:
     message = rm.odometry_message(1_700_000_000_123_456_789, 152.4, 10.0, 38.6, -2.5, pitch_angle=0.1)
     reading = rm.read_odometry(message)
-    assert reading == rm.OdometryReading(1_700_000_000_123_456_789, 152.4, 10.0, 38.6, -2.5)
+    assert reading == OdometryReading(1_700_000_000_123_456_789, 152.4, 10.0, 38.6, -2.5)
     orientation = message.pose.pose.orientation
     assert math.isclose(2 * math.atan2(orientation.y, orientation.w), 0.1)  # about +y: nose down
-    state = rm.helicopter_state(reading, 27.0)
+    state = helicopter_state(reading, 27.0)
     np.testing.assert_allclose(state, [2.5, 38.6, 27.0, 152.4, 10.0, 0.0])  # y = −climb rate
 
 
@@ -46,17 +53,17 @@ def test_rotor_power_travels_as_torque() -> None:
 @pytest.mark.parametrize(
     ("reading", "problem"),
     [
-        (rm.OdometryReading(0, math.nan, 0.0, 30.0, 0.0), "height is nan"),
-        (rm.OdometryReading(0, 100.0, 0.0, math.inf, 0.0), "forward speed is inf"),
-        (rm.OdometryReading(0, -5.0, 0.0, 30.0, 0.0), "height -5"),
-        (rm.OdometryReading(0, 100.0, 0.0, 30.0, -90.0), "climb rate -90"),
+        (OdometryReading(0, math.nan, 0.0, 30.0, 0.0), "height is nan"),
+        (OdometryReading(0, 100.0, 0.0, math.inf, 0.0), "forward speed is inf"),
+        (OdometryReading(0, -5.0, 0.0, 30.0, 0.0), "height -5"),
+        (OdometryReading(0, 100.0, 0.0, 30.0, -90.0), "climb rate -90"),
     ],
 )
-def test_implausible_states_are_named(reading: rm.OdometryReading, problem: str) -> None:
-    problems = rm.state_problems(rm.StateLimits(), odometry=reading)
+def test_implausible_states_are_named(reading: OdometryReading, problem: str) -> None:
+    problems = state_problems(StateLimits(), odometry=reading)
     assert len(problems) == 1 and problems[0].startswith(problem)
-    assert rm.state_problems(rm.StateLimits(), odometry=rm.OdometryReading(0, 100.0, 0.0, 30.0, -5.0)) == []
-    assert rm.state_problems(rm.StateLimits(), rotor=rm.RotorReading(0, 0.0, None))
+    assert state_problems(StateLimits(), odometry=OdometryReading(0, 100.0, 0.0, 30.0, -5.0)) == []
+    assert state_problems(StateLimits(), rotor=RotorReading(0, 0.0, None))
 
 
 def test_trajectory_message_round_trip_holds_the_controls() -> None:

@@ -26,6 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
+from helireach_ros.core.vehicle_readings import StateLimits
 from helireach_ros.ros import messages as rm
 
 __all__ = [
@@ -126,7 +127,7 @@ class VehicleInputFuzzer:
         internal_share: float = 0.05,
         failure_share: float = 0.1,
         failure_true_share: float = 0.2,
-        limits: rm.StateLimits | None = None,
+        limits: StateLimits | None = None,
         max_message_age_s: float = 1.0,
     ) -> None:
         self.seed = seed
@@ -135,7 +136,7 @@ class VehicleInputFuzzer:
         self.internal_share = internal_share
         self.failure_share = failure_share
         self.failure_true_share = failure_true_share
-        self.limits = limits or rm.StateLimits()
+        self.limits = limits or StateLimits()
         self.old_ns = int(2 * max_message_age_s * _SECOND) + _SECOND
         self.last_valid_stamp_ns = {"odometry": 0, "rotor": 0}
 

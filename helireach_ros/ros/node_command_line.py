@@ -164,7 +164,7 @@ def _is_declare_call(node: ast.AST) -> bool:
 
 def _evaluator(function_node: ast.AST, namespace: dict[str, Any]) -> Any:
     """Evaluates expressions of a function body in its module's namespace plus the simple local constants
-    assigned before its last declaration (``defaults = rm.StateLimits()``); whatever needs ``self``, a
+    assigned before its last declaration (``defaults = StateLimits()``); whatever needs ``self``, a
     declared value or anything else unavailable stays source text."""
     last_declaration = max(
         (getattr(node, "lineno", 0) for node in ast.walk(function_node) if _is_declare_call(node)), default=0

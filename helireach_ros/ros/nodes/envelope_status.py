@@ -60,6 +60,7 @@ from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.failure_episode import EpisodeState
 from helireach_ros.core.safety_status import EnvelopeEvidence, LiveEvidence, PlanEvidence, decide_safety_status
 from helireach_ros.core.status_values import parse_bool
+from helireach_ros.core.vehicle_readings import OdometryReading, StateLimits, state_problems
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import ParameterError, declare_aircraft, declare_checked_parameter
@@ -86,12 +87,12 @@ def envelope_domain(envelope: Any) -> tuple[ValidityDomain, float]:
 
 def evaluate_safety(
     envelope: Any | None,
-    reading: rm.OdometryReading | None,
+    reading: OdometryReading | None,
     state_age_s: float,
     stale_timeout_s: float,
     warn_margin: float,
     envelope_error: str = "",
-    limits: rm.StateLimits | None = None,
+    limits: StateLimits | None = None,
     input_problems: Sequence[str] = (),
     *,
     rotor_speed: float | None = None,
@@ -136,7 +137,7 @@ def evaluate_safety(
             state_age_s=state_age_s,
             state_stamp_ns=reading.stamp_ns,
         )
-        problems = rm.state_problems(limits or rm.StateLimits(), odometry=reading)
+        problems = state_problems(limits or StateLimits(), odometry=reading)
         if state_age_s > stale_timeout_s:
             state_problem = f"vehicle state {state_age_s:.1f} s old"
         elif problems:
@@ -259,7 +260,7 @@ class EnvelopeStatusNode(Node):
             self._aircraft_error = ""
         except Exception as error:  # a broken airframe file or conditions: STALE with the reason, never a crash
             self.aircraft, self._aircraft_error = None, f"aircraft not configured ({type(error).__name__}: {error})"
-        self._reading: rm.OdometryReading | None = None
+        self._reading: OdometryReading | None = None
         self._received_ns = 0
         self._rotor: tuple[float, int] | None = None  # (rotor speed, received ns)
         self._live: dict[str, str] | None = None  # the latest /helireach/live_reachability values
@@ -349,7 +350,7 @@ class EnvelopeStatusNode(Node):
             reading = rm.read_rotor(message)
         except ValueError:
             return  # the monitor republishes only valid rotor states; anything else is not a measurement
-        if rm.state_problems(rm.StateLimits(), rotor=reading):
+        if state_problems(StateLimits(), rotor=reading):
             return
         with self._lock:
             self._rotor = (reading.rotor_speed, self.get_clock().now().nanoseconds)

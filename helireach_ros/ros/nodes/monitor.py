@@ -39,6 +39,7 @@ from helireach_ros.core.failure_episode import (
     EpisodeTransition,
 )
 from helireach_ros.core.input_contract import OUT_OF_ORDER, WRONG_FRAME, FrameContract, InputGate
+from helireach_ros.core.vehicle_readings import StateLimits, state_problems
 from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
@@ -80,8 +81,8 @@ class VehicleMonitor(Node):
             (256, 1 << 30),
         )
         self._stale_timeout = declare("stale_timeout", 0.5, "no valid state for this long = STALE, s", (0.01, 60.0))
-        defaults = rm.StateLimits()
-        self._limits = rm.StateLimits(
+        defaults = StateLimits()
+        self._limits = StateLimits(
             min_height=declare("min_height", defaults.min_height, "lowest plausible height, m", (-100.0, 0.0)),
             max_height=declare("max_height", defaults.max_height, "highest plausible height, m", (1.0, 1e5)),
             max_forward_speed=declare(
@@ -204,7 +205,7 @@ class VehicleMonitor(Node):
     def _on_odometry(self, message: Odometry) -> None:
         now_ns = self._now_ns()
         reading = rm.read_odometry(message)
-        problems = rm.state_problems(self._limits, odometry=reading) + self._stamp_problems(reading.stamp_ns, now_ns)
+        problems = state_problems(self._limits, odometry=reading) + self._stamp_problems(reading.stamp_ns, now_ns)
         if not self._admit(
             "odometry", reading.stamp_ns, now_ns, problems, message.header.frame_id, message.child_frame_id
         ):
@@ -224,7 +225,7 @@ class VehicleMonitor(Node):
         except ValueError as error:
             self._admit("rotor", rm.stamp_nanoseconds(message.header.stamp), now_ns, [str(error)])
             return
-        problems = rm.state_problems(self._limits, rotor=reading) + self._stamp_problems(reading.stamp_ns, now_ns)
+        problems = state_problems(self._limits, rotor=reading) + self._stamp_problems(reading.stamp_ns, now_ns)
         if not self._admit("rotor", reading.stamp_ns, now_ns, problems):
             return
         with self._lock:

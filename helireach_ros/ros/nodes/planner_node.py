@@ -139,6 +139,13 @@ from helireach_ros.core.model import clip_rotor_speed_noise
 from helireach_ros.core.plan_verdict import plan_verdict
 from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.vehicle_readings import (
+    OdometryReading,
+    RotorReading,
+    StateLimits,
+    helicopter_state,
+    state_problems,
+)
 from helireach_ros.core.weight_tracking import (
     WeightChoice,
     WeightSample,
@@ -276,8 +283,8 @@ class LandingPlannerNode(Node):
 
         self._lock = threading.Lock()  # latest state, failure bookkeeping
         self._publish_lock = threading.Lock()  # one plan decision/publication at a time
-        self._odometry: tuple[rm.OdometryReading, int, str] | None = None
-        self._rotor: tuple[rm.RotorReading, int] | None = None
+        self._odometry: tuple[OdometryReading, int, str] | None = None
+        self._rotor: tuple[RotorReading, int] | None = None
         self._failure: FailureEpisode | None = None
         self._episode = EpisodeState()  # the monitor's failure-episode state (no_flag until one arrives)
         self._failure_count = 0
@@ -495,7 +502,7 @@ class LandingPlannerNode(Node):
 
     def _on_state(self, message: Odometry) -> None:
         reading = rm.read_odometry(message)
-        if rm.state_problems(rm.StateLimits(), odometry=reading):
+        if state_problems(StateLimits(), odometry=reading):
             return  # the monitor filters; a direct publisher's garbage is ignored here too
         with self._lock:
             self._odometry = (reading, self._now_ns(), message.child_frame_id or rm.DEFAULT_BODY_FRAME)
@@ -505,7 +512,7 @@ class LandingPlannerNode(Node):
             reading = rm.read_rotor(message, self._rotor_joint)
         except ValueError:
             return
-        if rm.state_problems(rm.StateLimits(), rotor=reading):
+        if state_problems(StateLimits(), rotor=reading):
             return
         now_ns = self._now_ns()
         with self._lock:
@@ -546,7 +553,7 @@ class LandingPlannerNode(Node):
         if power is None or (self._assume_total_power_loss and not measured_power):
             power = 0.0
         rotor_speed = clip_rotor_speed_noise(self.airframe, rotor_speed, _ROTOR_NOISE_TOLERANCE)
-        return rm.helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
+        return helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
 
     # -- the failure --------------------------------------------------------------------------------------------
     def _on_failure_event(self, message: Header) -> None:
