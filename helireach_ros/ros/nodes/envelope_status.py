@@ -1,7 +1,8 @@
 """Envelope status node: the published safety status, never wider than its evidence.
 
-Gathers the evidence and publishes the decision of :func:`helireach_ros.core.safety_status.decide_safety_status`
-(its docstring has the rules) on ``/helireach/safety_status`` (``diagnostic_msgs/DiagnosticStatus``, latched)
+Translates what arrives into evidence and publishes the decision of
+:func:`helireach_ros.core.safety_status.assess_safety` (the module has the rules; no policy lives here) on
+``/helireach/safety_status`` (``diagnostic_msgs/DiagnosticStatus``, latched)
 when the verdict changes and every ``publish_period``. The evidence:
 
 - the **envelope** (parameter ``envelope_file``; empty = the shipped one): its conservative answer at the
@@ -40,10 +41,7 @@ Heights between the monitor's ``min_height`` and 0 count as 0 (sensor noise on t
 
 from __future__ import annotations
 
-import functools
-import math
 import threading
-from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
@@ -56,10 +54,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from helireach_ros.core.envelope.data import VERDICTS
-from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.failure_episode import EpisodeState
-from helireach_ros.core.safety_status import EnvelopeEvidence, LiveEvidence, PlanEvidence, decide_safety_status
-from helireach_ros.core.status_values import parse_bool
+from helireach_ros.core.safety_status import LiveEvidence, PlanEvidence, assess_safety, live_evidence, plan_evidence
 from helireach_ros.core.vehicle_readings import OdometryReading, StateLimits, state_problems
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
@@ -78,134 +74,11 @@ class SafetyVerdict:
     values: dict[str, Any]
 
 
-@functools.lru_cache(maxsize=4)
-def envelope_domain(envelope: Any) -> tuple[ValidityDomain, float]:
-    """(validity domain, Ω₀ of its airframe) of a loaded envelope: read once, not at every state message."""
-    metadata = envelope.metadata
-    return envelope.validity_domain, float(metadata["airframe"]["nominal_rotor_speed"])
-
-
-def evaluate_safety(
-    envelope: Any | None,
-    reading: OdometryReading | None,
-    state_age_s: float,
-    stale_timeout_s: float,
-    warn_margin: float,
-    envelope_error: str = "",
-    limits: StateLimits | None = None,
-    input_problems: Sequence[str] = (),
-    *,
-    rotor_speed: float | None = None,
-    live: LiveEvidence | None = None,
-    episode: str = "normal",
-    plan: PlanEvidence | None = None,
-    live_warn_value: float = -0.1,
-    envelope_verdict: str = "robust",
-) -> SafetyVerdict:
-    """The safety verdict for a state: the evidence gathered here, decided by
-    :func:`helireach_ros.core.safety_status.decide_safety_status` (its docstring has the rules).
-
-    Args:
-        envelope: the loaded :class:`~helireach_ros.core.envelope.data.Envelope`, or None.
-        reading: the latest state, or None if none was received.
-        state_age_s: time since that state was received, s.
-        stale_timeout_s: older states are stale.
-        warn_margin: WARN below this margin (ft/kt units).
-        envelope_error: why there is no envelope.
-        limits: plausible ranges (default :class:`~helireach_ros.ros.messages.StateLimits`).
-        input_problems: one line per input with incompatible QoS (``<node>: <topic>: ...``).
-        rotor_speed: the fresh measured rotor speed, rad/s (None: not measured).
-        live: the latest live verdict (``/helireach/live_reachability``), or None.
-        episode: the failure episode's phase (``/helireach/failure_episode``).
-        plan: the current plan of the episode (``/helireach/plan_status``), or None.
-        live_warn_value: live WARN above this J.
-        envelope_verdict: ``robust`` (the envelope's robust verdict where it has one) or ``nominal``.
-    """
-    values: dict[str, Any] = {
-        "envelope_id": envelope.envelope_id if envelope is not None else "",
-        "warn_margin_ft_kt": warn_margin,
-    }
-    state_problem = ""
-    height = forward_speed = math.nan
-    if reading is None:
-        state_problem = "no vehicle state received"
-    else:
-        values.update(
-            height_m=reading.height,
-            forward_speed_m_s=reading.forward_speed,
-            climb_rate_m_s=reading.climb_rate,
-            state_age_s=state_age_s,
-            state_stamp_ns=reading.stamp_ns,
-        )
-        problems = state_problems(limits or StateLimits(), odometry=reading)
-        if state_age_s > stale_timeout_s:
-            state_problem = f"vehicle state {state_age_s:.1f} s old"
-        elif problems:
-            state_problem = f"invalid state ({'; '.join(problems)})"
-        height, forward_speed = max(reading.height, 0.0), reading.forward_speed
-    evidence = None
-    if envelope is not None and reading is not None and not state_problem:
-        # a 3-D envelope answers at the measured climb rate; a 2-D one at level trim, its domain checks the rest
-        climb_rate = reading.climb_rate if envelope.is_3d else 0.0
-        query = envelope.query(height, forward_speed, climb_rate, envelope_verdict)
-        validity_domain, omega0 = envelope_domain(envelope)
-        domain = validity_domain.check(reading.climb_rate, rotor_speed, omega0, power_fraction=envelope.power_fraction)
-        note = ""
-        if envelope_verdict == "robust" and query.verdict != "robust":
-            note = (
-                "the envelope has no robust verdict" if not envelope.has_robust_verdict
-                else "no robust verdict at this state's grid nodes"
-            )  # fmt: skip
-        evidence = EnvelopeEvidence(query.status, query.margin, query.by_interpolation, domain, query.verdict, note)
-        values["envelope_value"] = query.value
-    decision = decide_safety_status(
-        height=height,
-        forward_speed=forward_speed,
-        state_problem=state_problem,
-        envelope=evidence,
-        envelope_note=envelope_error,
-        live=live,
-        episode=episode,
-        plan=plan,
-        input_problems=input_problems,
-        warn_margin=warn_margin,
-        live_warn_value=live_warn_value,
-        rotor_measured=rotor_speed is not None,
-    )
-    return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[decision.level], decision.message, {**values, **decision.values})
-
-
-def live_evidence(values: dict[str, str], now_ns: int, max_age_s: float) -> LiveEvidence | None:
-    """A ``/helireach/live_reachability`` message as evidence (its age counted on this node's clock)."""
-    try:
-        state_age_s = (now_ns - int(values["state_stamp_ns"])) * 1e-9
-        return LiveEvidence(
-            status=values["status"],
-            value=float(values.get("value", "nan")),
-            verified=parse_bool(values.get("verified")) is True,
-            state_age_s=state_age_s,
-            current=0.0 <= state_age_s <= max_age_s,
-            reason=values.get("reason", ""),
-        )
-    except (KeyError, ValueError):
-        return None  # unreadable: no evidence, never a SAFE
-
-
-def plan_evidence(values: dict[str, str], episode_started_ns: int | None) -> PlanEvidence | None:
-    """The plan status as evidence, if it belongs to the current episode (same failure stamp)."""
-    try:
-        if episode_started_ns is None or int(values.get("failure_stamp_ns", "-1")) != episode_started_ns:
-            return None
-        status = "fallback" if parse_bool(values.get("fallback")) is True else values.get("status", "none")
-        return PlanEvidence(
-            status=status,
-            verified=parse_bool(values.get("safe")) is True and parse_bool(values.get("verified")) is True,
-            standby=parse_bool(values.get("standby")) is True,
-            time_to_land_s=float(values.get("time_to_land_s", "nan")),
-            late=float(values.get("late_by_s", "0")) > 0.0,  # a late *state* (not only after a fallback)
-        )
-    except ValueError:
-        return None
+def evaluate_safety(*args: Any, **kwargs: Any) -> SafetyVerdict:
+    """The safety status of a state (:func:`helireach_ros.core.safety_status.assess_safety`, same arguments) with its
+    level as the ``DiagnosticStatus`` constant."""
+    assessment = assess_safety(*args, **kwargs)
+    return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[assessment.level], assessment.message, assessment.values)
 
 
 class EnvelopeStatusNode(Node):
