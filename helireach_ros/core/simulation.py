@@ -407,7 +407,8 @@ class SimulatedVehicle:
             self.airframe, _SAMPLES_PER_SEGMENT, self.settings.replay_relative_tolerance
         )
         self._rng = np.random.default_rng(scenario.seed)
-        self.trim = trim_level_flight(self.airframe, scenario.forward_speed)
+        # trimmed at its height: in ground effect the rotor needs less power there than out of it
+        self.trim = trim_level_flight(self.airframe, scenario.forward_speed, scenario.height)
         self.time = 0.0
         self.state = np.array(
             [0.0, scenario.forward_speed, self.airframe.nominal_rotor_speed, scenario.height, 0.0, self.trim.power]
