@@ -61,6 +61,7 @@ from helireach_ros.core.vehicle_readings import OdometryReading, StateLimits, st
 
 __all__ = [
     "LEVEL_ORDER",
+    "LIVE_WARN_VALUE",
     "EnvelopeEvidence",
     "LiveEvidence",
     "PlanEvidence",
@@ -75,6 +76,13 @@ __all__ = [
 
 LEVEL_ORDER = {"OK": 0, "WARN": 1, "ERROR": 2, "STALE": 3}
 """Conservatism of the levels (a higher one wins): STALE (no evidence) above ERROR (evidence of danger)."""
+
+LIVE_WARN_VALUE = -0.05
+"""A safe live verdict with J above this is CAUTION: its touchdown is within 5 % of a landing limit (assumed).
+Not −0.1: with the momentum rotor and the flyability limits, the gentlest touchdown from the heart of the envelope
+(500 ft, 75 kt) is at J ≈ −0.10 (7.2 ft/s of 8, 13.5 kt of 15; flare held at 25° and 20°/s), and the shipped
+envelope's safe level-flight nodes sit at −0.09 to −0.11 wherever they are not next to the boundary, so a caution at
+−0.1 would be on nearly everywhere and tell the crew nothing; the boundary layer's nodes are at −0.07 to 0."""
 
 
 def more_conservative(first: str, second: str) -> str:
@@ -223,7 +231,7 @@ def decide_safety_status(
     plan: PlanEvidence | None = None,
     input_problems: Sequence[str] = (),
     warn_margin: float = 20.0,
-    live_warn_value: float = -0.1,
+    live_warn_value: float = LIVE_WARN_VALUE,
     rotor_measured: bool = True,
 ) -> SafetyDecision:
     """The safety status from every piece of evidence (the rules are in the module docstring).
@@ -332,7 +340,7 @@ def assess_safety(
     live: LiveEvidence | None = None,
     episode: str = "normal",
     plan: PlanEvidence | None = None,
-    live_warn_value: float = -0.1,
+    live_warn_value: float = LIVE_WARN_VALUE,
     envelope_verdict: str = "robust",
 ) -> SafetyDecision:
     """The safety status of a state: the evidence gathered here, decided by :func:`decide_safety_status` (the

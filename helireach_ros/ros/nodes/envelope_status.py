@@ -55,7 +55,14 @@ from sensor_msgs.msg import JointState
 
 from helireach_ros.core.envelope.data import VERDICTS
 from helireach_ros.core.failure_episode import EpisodeState
-from helireach_ros.core.safety_status import LiveEvidence, PlanEvidence, assess_safety, live_evidence, plan_evidence
+from helireach_ros.core.safety_status import (
+    LIVE_WARN_VALUE,
+    LiveEvidence,
+    PlanEvidence,
+    assess_safety,
+    live_evidence,
+    plan_evidence,
+)
 from helireach_ros.core.vehicle_readings import OdometryReading, StateLimits, state_problems
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
@@ -109,7 +116,7 @@ class EnvelopeStatusNode(Node):
             "live_max_age", 1.0, "a live verdict whose state is older than this is no evidence, s", (0.01, 60.0)
         )
         self._live_warn_value = declare(
-            "live_warn_value", -0.1, "a safe live verdict with J above this is CAUTION", (-1.0, 0.0)
+            "live_warn_value", LIVE_WARN_VALUE, "a safe live verdict with J above this is CAUTION", (-1.0, 0.0)
         )
         self._envelope_verdict = declare(
             "envelope_verdict", "robust",
