@@ -20,7 +20,8 @@ def test_shipped_airframes_load_in_si():
     uh60 = load_airframe("uh60a_class")
     assert uh60.rotor_radius == pytest.approx(26.83 * 0.3048)
     assert uh60.gross_weight == pytest.approx(16000 * 4.4482216152605)
-    assert uh60.limits.max_forward_speed == pytest.approx(6 * 1852 / 3600)
+    assert uh60.limits.max_forward_speed == pytest.approx(15 * 1852 / 3600)
+    assert uh60.rotor_model.inflow.value == "momentum" and uh60.rotor_model.ground_effect
     assert uh60.limits.max_pitch_angle == pytest.approx(math.radians(40))
     assert uh60.air_density == pytest.approx(1.225)
     oh58 = load_airframe("oh58a_class")
@@ -65,6 +66,31 @@ def _broken(document, path, value):
 def test_bad_airframes_are_rejected_naming_the_key(uh60_document, path, value, message):
     with pytest.raises(ConfigError, match=message):
         parse_airframe(_broken(uh60_document, path, value), where="test.yaml: ")
+
+
+def test_the_papers_reproduction_keeps_the_papers_numbers(uh60_document, tmp_path):
+    """``--method paper`` flies the paper's airframe: its rotor, 6 kt at touchdown and the rotor inertia the
+    reproduction was measured with; the result is the airframe the file described before its credible model (the
+    same digest, so its envelopes stay valid), while ``--rotor-model paper`` swaps only the rotor."""
+    uh60 = load_airframe("uh60a_class")
+    paper = uh60.paper_model()
+    assert paper.rotor_model.is_paper and not paper.paper_reproduction
+    assert paper.limits.max_forward_speed == pytest.approx(6 * 1852 / 3600)
+    assert paper.rotor_inertia == pytest.approx(7000 * 1.3558179483314004)
+    assert uh60.rotor_inertia == pytest.approx(8040 * 1.3558179483314004)
+    without = {key: value for key, value in uh60_document.items() if key != "paper_reproduction"}
+    without["parameters"] = {**without["parameters"], "rotor_inertia": uh60_document["paper_reproduction"][
+        "parameters"]["rotor_inertia"]}  # fmt: skip
+    without["limits"] = {**without["limits"], "max_forward_speed": uh60_document["paper_reproduction"]["limits"][
+        "max_forward_speed"]}  # fmt: skip
+    assert paper.digest() == parse_airframe(without).paper_model().digest()
+    rotor_only = uh60.with_rotor_model_choice("paper")
+    assert rotor_only.rotor_model.is_paper and rotor_only.limits == uh60.limits
+    assert rotor_only.rotor_inertia == uh60.rotor_inertia
+    broken = copy.deepcopy(uh60_document)
+    broken["paper_reproduction"]["limits"]["max_rotor_rpm"] = {"value": 1, "unit": "-", "source": "x"}
+    with pytest.raises(ConfigError, match=r"unknown key.*max_rotor_rpm"):
+        parse_airframe(broken, where="test.yaml: ")
 
 
 def test_rotor_speed_limits_must_leave_a_band(uh60_document):

@@ -159,6 +159,10 @@ def test_a_stored_control_function_rebuilds_the_stored_solution(small, airframe,
     """What a file without the solver's state can still warm-start from: the stored control function flown from
     the stored plan's state gives back its primal point (to the integrator's accuracy), and a solve from it is a
     warm solve with the cold solve's status."""
+    if method == "verified":
+        # its paper limits let a plan skim the ground in ground effect, which the replay (judged at the first
+        # contact) refuses: no momentum-rotor plan of this method verifies, so its mechanics use the paper's rotor
+        airframe = airframe.paper_rotor()
     planner = get_planner(airframe, settings.replace(method=method))
     node_state = initial_state_after_failure(airframe, 600 * FT, 60 * KT)
     stored = planner.plan(node_state)
@@ -579,7 +583,8 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     A grid through the hover unsafe band (50 ft steps) has nodes deep inside the band, whose warm answers
     from the unsafe node below are kept, and nodes near its edges, which are solved cold as before.
     """
-    heights, speeds = parse_range("0:400:9", FT), parse_range("0:10:2", KT)
+    heights, speeds = parse_range("0:400:9", FT), parse_range("0:20:2", KT)  # 20 kt: above the touchdown limit
+    assert speeds[1] > airframe.limits.max_forward_speed
     current = compute_envelope(EnvelopeJob(airframe, settings, 0.0, heights, speeds))
     legacy = compute_envelope(EnvelopeJob(airframe, settings, 0.0, heights, speeds, legacy_sweep=True))
     assert np.any(current.status == "unsafe") and np.any(current.status == "safe")
@@ -604,7 +609,7 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     assert heights[0] == 0.0 and column[0].status == legacy_column[0].status == STATUS_CODES["safe"]
     assert not column[1].warm_started and legacy_column[1].warm_started and column[2].warm_started
     # not-safe NLP answers are not replayed (a replay cannot change their status); every safe one is, and lands;
-    # on the ground at 10 kt the replay alone decides (no NLP)
+    # on the ground at 20 kt the replay alone decides (no NLP)
     replayed, solved = np.isfinite(current.arrays["replay_value"]), current.arrays["iterations"] > 0
     assert np.array_equal(replayed[solved], (current.status == "safe")[solved]), current.status
     assert current.status[0, 1] == "unsafe" and not solved[0, 1] and replayed[0, 1]

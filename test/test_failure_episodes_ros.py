@@ -114,7 +114,12 @@ def test_a_flag_flapping_at_100_hz_is_one_episode_with_a_trajectory_while_it_fla
 # --- engine recovered -----------------------------------------------------------------------------------------
 def test_a_flag_false_for_good_ends_the_episode_after_the_hold_and_replanning_stops(context: Context) -> None:
     hold_s = 0.6
-    harness, planner = monitor_and_planner(context, {"recovery_hold": hold_s}, replan_period=0.1)
+    # The harness holds the state still; a vehicle that does not descend as planned would teach the re-plans a
+    # disturbance holding it up (their gentle landings then fail the replay: NOT VERIFIED). Not learning one keeps
+    # them to the model's.
+    harness, planner = monitor_and_planner(
+        context, {"recovery_hold": hold_s}, replan_period=0.1, estimate_disturbance=False
+    )
     trajectories = harness.listen(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
     plan_statuses = harness.listen(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
     episodes = harness.listen(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.STREAM_QOS)
@@ -122,7 +127,9 @@ def test_a_flag_false_for_good_ends_the_episode_after_the_hold_and_replanning_st
         trigger_failure(harness, HEIGHT, SPEED)
         replanned = lambda: any(int(fields.get("replan_index", "0")) >= 2 for fields in values_of(plan_statuses))  # noqa: E731
         assert harness.keep_publishing(HEIGHT, SPEED, until=replanned), values_of(plan_statuses)[-1:]
-        assert plan_statuses[-1].level == DiagnosticStatus.OK and plan_statuses[-1].message.startswith("SAFE")
+        assert plan_statuses[-1].level == DiagnosticStatus.OK and plan_statuses[-1].message.startswith("SAFE"), (
+            plan_statuses[-1].message
+        )
 
         def relit(_: float) -> None:
             harness.failure.publish(Bool(data=False))

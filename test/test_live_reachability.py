@@ -48,9 +48,9 @@ def test_the_failure_state_keeps_the_power_fraction_of_the_measured_power() -> N
 TRACK = [
     (500, 75, 0, 100),
     (480, 75, -1500, 100),
-    (440, 72, -3000, 98),
-    (380, 70, -3000, 96),
-    (300, 65, -2000, 100),
+    (440, 72, -1800, 98),  # powered: the steady autorotation descends ~1,930 ft/min at 70 kt
+    (380, 70, -1800, 96),
+    (300, 65, -1500, 100),
     (250, 60, 1000, 101),
     (150, 40, -1000, 100),
     (80, 30, -500, 99),
@@ -77,12 +77,13 @@ def test_live_verdicts_equal_helireach_plan_at_the_same_state(airframe, settings
 
 
 def test_a_state_the_level_trim_envelope_calls_safe_can_be_unsafe_in_a_descent(airframe, settings, planner) -> None:
-    # 200 ft, 100 kt: safe from level trim in the shipped envelope; in a 2,500 ft/min descent it is not.
+    # 40 ft, 85 kt: safe from level trim in the shipped envelope; in a 1,800 ft/min descent (the ground ~1.3 s
+    # away) it is not.
     envelope = load_envelope(default_envelope_path(), airframe, settings, 0.0)
-    assert envelope.query(200 * FT, 100 * KT).status == "safe"
+    assert envelope.query(40 * FT, 85 * KT).status == "safe"
     clock = Clock()
     verdict = LiveEvaluator(LiveSettings(), planner.plan).evaluate(
-        measured(airframe, 200, 100, -2500), clock.now_ns, clock.now_ns, clock
+        measured(airframe, 40, 85, -1800), clock.now_ns, clock.now_ns, clock
     )
     assert verdict is not None and verdict.status == "unsafe" and not verdict.safe
 
@@ -97,7 +98,7 @@ def test_the_standby_plan_is_the_latest_safe_verdict_if_fresh(airframe, planner)
     assert evaluator.standby(stamp + 400 * MS) is None  # too old for this failure
     assert evaluator.standby(stamp - 10 * MS) is None  # a failure before the state: not its plan
     # A newer verdict that is not safe withdraws the standby, however fresh the old safe one is.
-    unsafe = evaluator.evaluate(measured(airframe, 200, 100, -2500), stamp + 100 * MS, stamp + 100 * MS, clock)
+    unsafe = evaluator.evaluate(measured(airframe, 40, 85, -1800), stamp + 100 * MS, stamp + 100 * MS, clock)
     assert unsafe is not None and not unsafe.safe
     assert evaluator.standby(stamp + 150 * MS) is None
 

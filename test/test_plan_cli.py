@@ -6,10 +6,14 @@ import sys
 
 import pytest
 
+from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.model import steady_autorotation
+from helireach_ros.core.units import FT, KT
 
-def _helireach(*arguments: str) -> subprocess.CompletedProcess:
+
+def _helireach(*arguments: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "helireach_ros.cli.main", *arguments], capture_output=True, text=True, timeout=120
+        [sys.executable, "-m", "helireach_ros.cli.main", *arguments], capture_output=True, text=True, timeout=timeout_s
     )
 
 
@@ -20,7 +24,9 @@ def test_plan_json_and_figure(tmp_path):
     summary = json.loads(result.stdout)
     assert summary["safe"] is True and summary["verified"] is True
     assert summary["value"] <= 0.0
-    assert 8.0 <= summary["time_to_land_s"] <= 16.0
+    # no faster than the steady autorotation's descent at 75 kt, and no more than twice as slow (the flare)
+    steady_descent_time = 500 * FT / steady_autorotation(load_airframe("uh60a_class"), 75 * KT)[0]
+    assert steady_descent_time <= summary["time_to_land_s"] <= 2.0 * steady_descent_time
     assert set(summary["touchdown"]) >= {"descent_rate_ft_s", "forward_speed_kt", "rotor_speed_pct"}
     assert summary["touchdown"]["descent_rate_ft_s"] <= 8.0
     assert summary["replay"]["value"] <= 0.0
@@ -105,8 +111,10 @@ def test_the_default_plan_is_flyable_and_the_delay_and_limits_are_reported():
     verified = json.loads(
         _helireach("plan", "--height-ft", "500", "--speed-kt", "75", "--method", "verified", "--json").stdout
     )
-    assert not verified["flyability"]["within_limits"]  # the paper-limit plan: steps, 40 deg, ends above the ground
-    assert "no ground contact" in verified["flyability"]["violations"]
+    assert not verified["flyability"]["within_limits"]  # the paper-limit plan: steps and 40-degree attitudes
+    violations = verified["flyability"]["violations"]
+    assert any(violation.startswith("collective rate inf/s") for violation in violations), violations
+    assert any(violation.startswith("nose-up attitude 40.0 deg") for violation in violations), violations
 
 
 def test_the_rotor_model_is_selectable_and_the_paper_method_keeps_the_papers():
@@ -125,7 +133,8 @@ def test_the_rotor_model_is_selectable_and_the_paper_method_keeps_the_papers():
 
 @pytest.mark.build  # compiles the NLP's C code on a machine whose cache does not have it yet
 def test_nlp_cache_builds_the_default_and_refuses_an_unknown_airframe_with_one_line():
-    built = _helireach("nlp-cache")
+    # a hang guard, not a timing: compiling the momentum rotor's NLP takes minutes on 2 cores (bench/ measures it)
+    built = _helireach("nlp-cache", timeout_s=900.0)
     assert built.returncode == 0, built.stderr
     assert built.stdout.startswith("uh60a_class: ") and "linear solver" in built.stdout
     refused = _helireach("nlp-cache", "--airframe", "no_such_airframe")

@@ -478,7 +478,9 @@ def test_an_unknown_executor_kind_is_refused() -> None:
 
 
 def test_todays_weight_rebuilds_the_model_and_refuses_the_envelope_made_for_another(context: Context) -> None:
-    weight = 1.05 * load_airframe("uh60a_class").gross_weight
+    # 5 % lighter: a landing from 500 ft / 75 kt exists (5 % heavier it does not: J = +0.003, the flare short of
+    # rotor energy), so the rebuilt model's plan is SAFE; heavier, refused: the test below
+    weight = 0.95 * load_airframe("uh60a_class").gross_weight
     harness, planner = planner_harness(
         context, Parameter("gross_weight", value=weight), Parameter("replan_period", value=0.0)
     )

@@ -70,8 +70,8 @@ def test_the_status_uses_the_envelopes_robust_verdict_by_default_and_says_which_
         values = rm.status_values(statuses[-1])
         assert "not robust" in statuses[-1].message
         assert values["envelope_verdict"] == "robust" and values["envelope_status"] == "not_robust"
-        # 600 ft / 45 kt: robust, and far from the not-robust nodes
-        assert harness.keep_publishing(600 * FT, 45 * KT, until=level_is(statuses, DiagnosticStatus.OK))
+        # 400 ft / 90 kt: robust, and far from the not-robust nodes and from the boundary
+        assert harness.keep_publishing(400 * FT, 90 * KT, until=level_is(statuses, DiagnosticStatus.OK))
         assert statuses[-1].message.startswith("SAFE (robust)")
         # asked for the nominal verdict, the same state is SAFE again, and the status says so
         result = status_node.set_parameters([Parameter("envelope_verdict", value="nominal")])[0]
@@ -134,10 +134,10 @@ def test_with_the_live_planner_a_descent_the_envelope_calls_safe_is_an_error(
                 and rm.status_values(statuses[-1]).get("evidence") == "envelope+live"
             ),
         ), statuses[-1].message
-        # 200 ft, 100 kt, 2,500 ft/min down: outside the level-trim envelope's domain (its lookup says safe); the
+        # 40 ft, 85 kt, 1,800 ft/min down: outside the level-trim envelope's domain (its lookup says safe); the
         # live verdict says no safe landing exists from there.
         assert harness.keep_publishing(
-            200 * FT, 100 * KT, climb_rate=-2500 * FPM, until=level_is(statuses, DiagnosticStatus.ERROR)
+            40 * FT, 85 * KT, climb_rate=-1800 * FPM, until=level_is(statuses, DiagnosticStatus.ERROR)
         ), statuses[-1].message
         values = rm.status_values(statuses[-1])
         assert (

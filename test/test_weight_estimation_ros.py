@@ -90,12 +90,18 @@ def test_the_node_plans_the_failure_and_replans_for_the_weight_it_estimated(cont
         assert float(fields["planned_gross_weight_n"]) == pytest.approx(expected)
         assert float(fields["gross_weight_estimate_change"]) == pytest.approx(HEAVIER, abs=0.002)
         harness.failure.publish(Bool(data=True))
-        assert fly_until(harness, 0.0, lambda: len(refined_plans(statuses)) >= 3)  # failure plan + 2 re-plans
+        # 5 % heavier, no landing from 500 ft / 75 kt is safe (J +0.003): no live verdict is a standby plan, and the
+        # deadline's fallback (flagged, never safe, the envelope's plan for the file's weight) may go out first
+        planned = lambda: [plan for plan in refined_plans(statuses) if plan["fallback"] == "false"]  # noqa: E731
+        assert fly_until(harness, 0.0, lambda: len(planned()) >= 3)  # failure plan + 2 re-plans
         for plan in refined_plans(statuses):
+            if plan["fallback"] == "true":
+                assert plan["status"] == "fallback" and plan["safe"] == "false", plan
+                continue
             assert float(plan["planned_gross_weight_n"]) == pytest.approx(expected), plan
             assert plan["gross_weight_source"] in ("estimate", "held"), plan
             assert float(plan["gross_weight_n"]) == airframe.gross_weight  # the configured aircraft, unchanged
-        first = refined_plans(statuses)[0]
+        first = planned()[0]
         assert first["replan_index"] == "0" and first["status"] in ("safe", "unsafe", "unverified")
         assert planner.episode_weight.gross_weight == pytest.approx(expected)
     finally:

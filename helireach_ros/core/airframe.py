@@ -122,6 +122,8 @@ class Airframe:
             ``flyability`` section; the :class:`FlyabilityLimits` defaults, all assumed, where it is missing).
         rotor_model: the rotor's aerodynamics (inflow, ground effect, induced and profile power; the YAML's
             ``rotor_model`` section; where it is missing, the paper's rotor, which the file was written for).
+        paper_reproduction: ``(section.key, SI value)`` pairs of the YAML's optional ``paper_reproduction``
+            section: the numbers the paper's reproduction (:meth:`paper_model`) uses where this file's own differ.
         sources: where each number came from (not part of equality or the hash).
     """
 
@@ -141,6 +143,7 @@ class Airframe:
     limits: LandingLimits
     flyability: FlyabilityLimits = FlyabilityLimits()
     rotor_model: RotorModel = PAPER_ROTOR_MODEL
+    paper_reproduction: tuple[tuple[str, float], ...] = ()
     sources: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     @property
@@ -183,10 +186,21 @@ class Airframe:
         """Returns a copy with another rotor model (e.g. :meth:`paper_model` for the paper's)."""
         return dataclasses.replace(self, rotor_model=rotor_model)
 
-    def paper_model(self) -> Airframe:
-        """This airframe with the paper's rotor model (hover inflow, no ground effect): the ``paper`` method's."""
+    def paper_rotor(self) -> Airframe:
+        """This airframe with the paper's rotor model (hover inflow, no ground effect), its other numbers kept."""
         hub_height = self.rotor_model.hub_height
         return self.with_rotor_model(dataclasses.replace(PAPER_ROTOR_MODEL, hub_height=hub_height))
+
+    def paper_model(self) -> Airframe:
+        """The paper's reproduction (the ``paper`` method's airframe): the paper's rotor, and the file's
+        ``paper_reproduction`` numbers where they differ from its own (e.g. the paper's 6 kt touchdown speed)."""
+        changes: dict[str, Any] = {
+            key.split(".", 1)[1]: value for key, value in self.paper_reproduction if key.startswith("parameters.")
+        }
+        limits = {key.split(".", 1)[1]: value for key, value in self.paper_reproduction if key.startswith("limits.")}
+        changes.update(limits=dataclasses.replace(self.limits, **limits), paper_reproduction=())
+        reproduction = dataclasses.replace(self, **changes)
+        return reproduction.paper_rotor()
 
     def with_rotor_model_choice(self, choice: str) -> Airframe:
         """The airframe with the rotor model a user chose by name (:data:`ROTOR_MODEL_CHOICES`): ``airframe`` (its
@@ -199,7 +213,7 @@ class Airframe:
         if choice == "airframe":
             return self
         if choice == "paper":
-            return self.paper_model()
+            return self.paper_rotor()
         if choice == "momentum":
             model = self.rotor_model
             return self.with_rotor_model(
@@ -215,6 +229,8 @@ class Airframe:
         """
         data = dataclasses.asdict(self)
         data.pop("sources")
+        if not self.paper_reproduction:  # as before the section existed: the same digest
+            data.pop("paper_reproduction")
         if self.rotor_model.is_paper:
             data.pop("rotor_model")
         data["air_density"] = self.air_density
@@ -343,7 +359,7 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
     """
     if not isinstance(document, dict):
         raise ConfigError(f"{where}an airframe file must be a mapping with name, parameters, limits")
-    allowed = {"name", "description", "parameters", "limits", "flyability", "rotor_model"}
+    allowed = {"name", "description", "parameters", "limits", "flyability", "rotor_model", "paper_reproduction"}
     unknown = sorted(set(document) - allowed)
     if unknown:
         raise ConfigError(f"{where}unknown top-level key(s): {', '.join(unknown)}")
@@ -371,14 +387,36 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
     if max(flyability_limits.max_nose_up_pitch, flyability_limits.max_nose_down_pitch) > limits["max_pitch_angle"]:
         raise ConfigError(f"{where}flyability: the pitch limits must lie inside limits.max_pitch_angle")
     rotor_model, rotor_sources = _parse_rotor_model(document.get("rotor_model"), where)
+    paper_reproduction, paper_sources = _parse_paper_reproduction(document.get("paper_reproduction"), where)
     return Airframe(
         name=str(document["name"]),
         limits=LandingLimits(**limits),
         flyability=flyability_limits,
         rotor_model=rotor_model,
-        sources=tuple(parameter_sources + limit_sources + flyability_sources + rotor_sources),
+        paper_reproduction=paper_reproduction,
+        sources=tuple(parameter_sources + limit_sources + flyability_sources + rotor_sources + paper_sources),
         **parameters,
     )
+
+
+def _parse_paper_reproduction(section: Any, where: str) -> tuple[tuple[tuple[str, float], ...], list[tuple[str, str]]]:
+    """The optional ``paper_reproduction`` section: ``parameters`` and ``limits`` entries (any subset, each
+    ``{value, unit, source}``) that the paper's reproduction uses instead of the file's own."""
+    if section is None:
+        return (), []
+    if not isinstance(section, dict) or set(section) - {"parameters", "limits"}:
+        raise ConfigError(f"{where}'paper_reproduction' must be a mapping with 'parameters' and/or 'limits'")
+    values: list[tuple[str, float]] = []
+    sources: list[tuple[str, str]] = []
+    for name, schema in (("parameters", _PARAMETER_SCHEMA), ("limits", _LIMITS_SCHEMA)):
+        entries = section.get(name, {})
+        if not isinstance(entries, dict):
+            raise ConfigError(f"{where}paper_reproduction.{name} must be a mapping")
+        subset = {key: schema[key] for key in entries if key in schema}
+        parsed, parsed_sources = _parse_section(entries, subset, f"paper_reproduction.{name}", where)
+        values += [(f"{name}.{key}", value) for key, value in parsed.items()]
+        sources += parsed_sources
+    return tuple(values), sources
 
 
 _ROTOR_MODEL_SCHEMA: dict[str, tuple[str, float, float]] = {
