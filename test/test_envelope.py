@@ -530,6 +530,23 @@ def test_progress_draws_a_bar_on_a_terminal_and_lines_otherwise():
         make_executor(workers=0)
 
 
+def test_a_worker_that_dies_ends_the_computation_with_an_error_not_a_wait():
+    """A worker process that ends abruptly (here ``os._exit``; seen: a segmentation fault in native code) fails its
+    tasks at once with an error, which ends the computation (multiprocessing.Pool replaced such a worker and waited
+    for its lost task for ever)."""
+    import os
+
+    from helireach_ros.core.envelope.workers import WorkerDiedError, make_executor
+
+    executor = make_executor(workers=2)
+    try:
+        assert sorted(executor.map_unordered(abs, [(-3,), (4,), (-5,)])) == [3, 4, 5]
+        with pytest.raises(WorkerDiedError, match="worker process died"):
+            list(executor.map_unordered(os._exit, [(1,), (1,)]))
+    finally:
+        executor.abort()
+
+
 def test_range_and_list_parsing():
     assert parse_range("0:800:41", FT)[1] == pytest.approx(20 * FT)
     for bad in ("0:800", "800:0:5", "0:800:1", "a:b:c", "0:nan:3"):

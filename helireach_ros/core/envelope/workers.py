@@ -7,18 +7,19 @@ result is identical for all of them.
 
 from __future__ import annotations
 
+import concurrent.futures
 import multiprocessing
 import os
 import signal
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
-__all__ = ["SerialExecutor", "make_executor"]
+__all__ = ["SerialExecutor", "WorkerDiedError", "make_executor"]
 
 
-def _call(item: tuple[Callable[..., Any], tuple[Any, ...]]) -> Any:
-    function, arguments = item
-    return function(*arguments)
+class WorkerDiedError(RuntimeError):
+    """A local worker process ended abruptly (a crash in native code, or killed) while tasks were outstanding."""
 
 
 def _ignore_interrupts() -> None:
@@ -47,25 +48,43 @@ class SerialExecutor:
 
 
 class _ProcessExecutor:
-    """A pool of local worker processes (forkserver: workers start from a process that imported CasADi once)."""
+    """A pool of local worker processes (forkserver: workers start from a process that imported CasADi once).
+
+    A ``concurrent.futures`` pool, not ``multiprocessing.Pool``: when a worker dies mid-task (a segmentation fault
+    in a native library, the OOM killer), ``multiprocessing.Pool`` replaces it and loses its task, and the
+    computation waits for that result for ever; here the outstanding tasks fail and :class:`WorkerDiedError` is raised.
+    """
 
     def __init__(self, workers: int) -> None:
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["helireach_ros.core.envelope.compute", "helireach_ros.core.planner"])
         self.workers = workers
         self.description = f"{workers} local worker processes"
-        self._pool = context.Pool(workers, initializer=_ignore_interrupts)
+        self._pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_ignore_interrupts)
+        self._futures: list[concurrent.futures.Future] = []
 
     def map_unordered(self, function: Callable[..., Any], tasks: Sequence[tuple[Any, ...]]) -> Iterator[Any]:
-        yield from self._pool.imap_unordered(_call, [(function, arguments) for arguments in tasks], chunksize=1)
+        self._futures = [self._pool.submit(function, *arguments) for arguments in tasks]
+        try:
+            for future in concurrent.futures.as_completed(self._futures):
+                yield future.result()
+        except BrokenProcessPool as error:
+            raise WorkerDiedError(
+                "a worker process died with tasks outstanding (a crash in native code, or killed: see the system log)"
+            ) from error
+        finally:
+            self._futures = []
 
     def abort(self) -> None:
-        self._pool.terminate()
-        self._pool.join()
+        for future in self._futures:
+            future.cancel()
+        # the running tasks are not waited for: a solve can take seconds, and an abort is an interrupt or an error
+        for process in list(getattr(self._pool, "_processes", {}).values()):
+            process.terminate()
+        self._pool.shutdown(wait=True, cancel_futures=True)
 
     def close(self) -> None:
-        self._pool.close()
-        self._pool.join()
+        self._pool.shutdown(wait=True)
 
 
 class _DaskExecutor:
