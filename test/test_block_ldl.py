@@ -334,6 +334,16 @@ def test_plans_with_the_block_ldl_match_mumps(method, tmp_path):
         assert warm.value == pytest.approx(warm_reference.value, **_value_tolerance(warm_reference))
 
 
+@needs_gcc
+def test_the_paper_transcription_keeps_mumps(tmp_path):
+    """Its single LGR interval couples every point to every other: not the block-banded KKT systems the block LDL^T
+    is made for (it crashed on them), so the paper method solves with MUMPS."""
+    codegen = CodegenSettings(mode="off", cache_dir=str(tmp_path))
+    airframe = load_airframe("uh60a_class")
+    assert LandingPlanner(airframe, load_settings(method="paper"), codegen).linear_solver == "MUMPS"
+    assert LandingPlanner(airframe, load_settings(), codegen).linear_solver.startswith("block LDL^T")
+
+
 def _value_tolerance(reference) -> dict[str, float]:
     """A verified plan's value to 1e-5 (its margin is what the status and the envelope use); another plan's to the
     two decimals the status shows it with, or 1e-3 relative: no verified landing rests on it, and IPOPT's path,

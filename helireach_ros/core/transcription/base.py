@@ -16,9 +16,11 @@ unique among equally good ones; it can only raise the value (a conservative bias
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
+from typing import ClassVar
 
 import casadi as ca
 import numpy as np
@@ -89,6 +91,10 @@ class Transcription(ABC):
     solver where it can be built, :mod:`helireach_ros.core.block_ldl`; ``linear_solver`` says which).
     """
 
+    block_banded_kkt: ClassVar[bool] = True
+    """Whether the KKT systems are block-banded over collocation intervals, which the block LDL^T is made and
+    measured for; a transcription whose are not gets MUMPS."""
+
     # What a subclass's ``_build`` defines: the NLP and the bounds of its variables and constraints.
     decision: ca.SX
     objective: ca.SX
@@ -148,7 +154,9 @@ class Transcription(ABC):
             }
         )
         codegen = codegen or CodegenSettings.from_environment()
-        linear_solver, self.linear_solver = linear_solver_options(codegen)
+        linear_solver, self.linear_solver = linear_solver_options(
+            codegen if self.block_banded_kkt else dataclasses.replace(codegen, linear_solver="mumps")
+        )
         base.update(linear_solver)
         warm.update(linear_solver)
         solvers, self.nlp_functions = ipopt_solvers(nlp, {"landing_cold": base, "landing_warm": warm}, codegen)

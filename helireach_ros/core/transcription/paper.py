@@ -31,6 +31,11 @@ __all__ = ["PaperTranscription"]
 class PaperTranscription(Transcription):
     """Single-interval LGR collocation with time freeze and log time transform (see module docstring)."""
 
+    # One interval of 24-60 LGR points couples every point to every other: no block band. The block LDL^T, made for
+    # the banded systems, crashed on these (a segmentation fault in its factorization: 3 of 6 runs of
+    # bench/replay_failures.py's paper variant, 2 workers of a paper-method envelope), so IPOPT keeps MUMPS here.
+    block_banded_kkt = False
+
     def _build(self) -> None:
         count = self.settings.paper_points
         scale_c = self.settings.paper_time_scale
