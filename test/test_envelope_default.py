@@ -12,7 +12,12 @@ import numpy as np
 import pytest
 
 from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.envelope.data import FORMAT_VERSION_ANSWERS, default_envelope_path, load_envelope
+from helireach_ros.core.envelope.data import (
+    FORMAT_VERSION_ANSWERS,
+    Envelope,
+    default_envelope_path,
+    load_envelope,
+)
 from helireach_ros.core.model import initial_state_after_failure
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.settings import load_settings
@@ -110,6 +115,13 @@ def test_no_avoid_above_the_band_which_narrows_with_speed_to_the_ground(shipped)
     touchdown_limit_kt = load_airframe("uh60a_class").limits.max_forward_speed / KT
     on_ground = shipped.status[0]
     assert np.array_equal(on_ground == "safe", speeds_kt <= touchdown_limit_kt + 1e-9), on_ground
+
+
+def test_the_rotor_named_is_the_one_its_plans_flew(shipped):
+    assert shipped.rotor_model_text == "momentum rotor, ground effect"
+    # the paper method flies the airframe's paper reproduction, whatever rotor the file's airframe has
+    settings = dict(shipped.metadata["settings"], method="paper")
+    assert Envelope(shipped.arrays, dict(shipped.metadata, settings=settings)).rotor_model_text == "paper rotor"
 
 
 def test_queries_on_the_shipped_envelope(shipped):

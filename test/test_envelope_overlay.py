@@ -49,7 +49,8 @@ def test_method_and_delay_flags_are_recorded_in_the_files(paper_and_verified):
 def test_overlay_writes_one_figure_with_one_legend_entry_per_file(paper_and_verified, tmp_path):
     envelopes = [load_envelope(path) for path in paper_and_verified]
     texts = legend_texts(overlay_figure(envelopes))
-    assert texts == ["paper, delay 0 s", "verified, delay 0 s"]
+    # the paper method flies the paper's rotor, the verified one the airframe's: the labels say so
+    assert texts == ["paper, delay 0 s, paper rotor", "verified, delay 0 s, momentum rotor, ground effect"]
     out = tmp_path / "overlay.png"
     result = run_cli("envelope", "plot", *map(str, paper_and_verified), "--out", str(out))
     assert result.returncode == 0, result.stderr

@@ -540,9 +540,10 @@ class Envelope:
     @property
     def rotor_model_text(self) -> str:
         """The rotor model the envelope was computed with, in words ("paper rotor" when the airframe record has
-        none: the paper's rotor, or a file from before the rotor model existed)."""
+        none: the paper's rotor, or a file from before the rotor model existed; and for the ``paper`` method, whose
+        planner flies the airframe's paper reproduction whatever the file's rotor)."""
         rotor = self._metadata.get("airframe", {}).get("rotor_model")
-        if not rotor:
+        if not rotor or self._metadata.get("settings", {}).get("method") == "paper":
             return "paper rotor"
         return f"{rotor.get('inflow', '?')} rotor" + (", ground effect" if rotor.get("ground_effect") else "")
 
