@@ -79,6 +79,7 @@ class _ProcessExecutor:
         for future in self._futures:
             future.cancel()
         # the running tasks are not waited for: a solve can take seconds, and an abort is an interrupt or an error
+        # (ProcessPoolExecutor has no public way to stop its workers before Python 3.14's terminate_workers)
         for process in list(getattr(self._pool, "_processes", {}).values()):
             process.terminate()
         self._pool.shutdown(wait=True, cancel_futures=True)

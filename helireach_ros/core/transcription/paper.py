@@ -32,8 +32,9 @@ class PaperTranscription(Transcription):
     """Single-interval LGR collocation with time freeze and log time transform (see module docstring)."""
 
     # One interval of 24-60 LGR points couples every point to every other: no block band. The block LDL^T, made for
-    # the banded systems, crashed on these (a segmentation fault in its factorization: 3 of 6 runs of
-    # bench/replay_failures.py's paper variant, 2 workers of a paper-method envelope), so IPOPT keeps MUMPS here.
+    # the banded systems, crashed on these (a segmentation fault in its factorization: 4 of 8 runs of
+    # bench/replay_failures.py's variants, always in the paper one; both workers of a paper-method envelope), so
+    # IPOPT keeps MUMPS here (docs/decisions/block-ldl.md).
     block_banded_kkt = False
 
     def _build(self) -> None:
