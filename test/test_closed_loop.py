@@ -13,7 +13,7 @@ import pytest
 
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
 from helireach_ros.core.planner import get_planner
-from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.simulation import Scenario, SimulatedVehicle, load_scenario
 
 
 @pytest.fixture(scope="module")
@@ -77,3 +77,23 @@ def test_planning_with_todays_weight_absorbs_what_re_planning_cannot(demo_scenar
     )
     assert not with_file_weight.touchdown.within_limits
     assert with_todays_weight.touchdown.within_limits, with_todays_weight.touchdown.reason
+
+
+def test_the_rotor_is_judged_until_ground_contact_as_well_as_until_the_touchdown_set(airframe, settings) -> None:
+    """A vehicle already in the touchdown set (1 ft up, 3.3 ft/s, 4 kt) that pulls full collective with its rotor at
+    80.5 % meets the touchdown limits by the paper's rule, which stops watching the rotor there; held to ground contact,
+    as the replay holds flyable plans, its rotor leaves the 80 % touchdown floor before the wheels touch."""
+    omega0 = airframe.nominal_rotor_speed
+    scenario = Scenario(name="cushion", height=0.3, forward_speed=2.0, failure_time=0.0)
+    vehicle = SimulatedVehicle(
+        scenario, airframe, settings,
+        failure_state=np.array([1.0, 2.0, 0.805 * omega0, 0.3, 0.0, 0.0]),
+        failure_controls=np.array([airframe.max_thrust_coefficient, 0.0]),
+    )  # fmt: skip
+    vehicle.advance(10.0)
+    touchdown = vehicle.touchdown
+    assert touchdown is not None and touchdown.within_limits, touchdown
+    assert touchdown.min_rotor_speed == pytest.approx(0.805 * omega0)
+    floor = airframe.flyability.touchdown_min_rotor_speed_ratio * omega0
+    assert touchdown.min_rotor_speed_to_contact < floor
+    assert not touchdown.rotor_held_to_contact and not touchdown.within_limits_to_contact

@@ -358,9 +358,13 @@ class TouchdownReport:
         descent_rate: y at contact, m/s. forward_speed: v at contact, m/s. rotor_speed: Ω at contact, rad/s.
         min_rotor_speed, max_rotor_speed: Ω range in flight (see the module docstring), rad/s.
         value: J at contact (≤ 0: within the touchdown limits; inf without a contact).
-        rotor_speed_within_limits: Ω stayed within its limits (± the replay margin).
+        rotor_speed_within_limits: Ω stayed within its limits (± the replay margin) until the touchdown set.
         within_limits: J ≤ 0 and the rotor speed stayed within limits.
         reason: a short explanation when not within limits.
+        min_rotor_speed_to_contact: the lowest Ω until ground contact, rad/s (the cushion below the touchdown
+            set included).
+        rotor_held_to_contact: Ω stayed within its limits until ground contact (the replay's rule for flyable
+            plans), not only until the touchdown set (|h| ≤ the height tolerance at the touchdown speeds).
     """
 
     time_after_failure: float
@@ -373,6 +377,13 @@ class TouchdownReport:
     rotor_speed_within_limits: bool
     within_limits: bool
     reason: str = ""
+    min_rotor_speed_to_contact: float = math.nan
+    rotor_held_to_contact: bool = False
+
+    @property
+    def within_limits_to_contact(self) -> bool:
+        """Within limits with the rotor judged until ground contact."""
+        return self.within_limits and self.rotor_held_to_contact
 
 
 class SimulatedVehicle:
@@ -420,6 +431,7 @@ class SimulatedVehicle:
         self._followed: list[tuple[float, ControlSchedule]] = []  # (time it was received, schedule), in order
         self._rotor_range = (math.inf, -math.inf)
         self._rotor_low_above_commit = math.inf  # flyable plans: the in-flight limit holds above the commit height
+        self._rotor_low_to_contact = math.inf
         self._in_touchdown_set = False
         if failure_state is not None:
             self._start_at_failure(np.asarray(failure_state, float), failure_controls)
@@ -533,7 +545,8 @@ class SimulatedVehicle:
         self.history.append((self.time, self.state.copy()))
 
     def _note_sample(self, state: np.ndarray) -> None:
-        """Tracks Ω in flight: from the failure until the vehicle is in the touchdown set (J ≤ 0)."""
+        """Tracks Ω in flight: from the failure until the vehicle is in the touchdown set (J ≤ 0), and until contact."""
+        self._rotor_low_to_contact = min(self._rotor_low_to_contact, float(state[2]))
         if self._in_touchdown_set:
             return
         self._rotor_range = (min(self._rotor_range[0], float(state[2])), max(self._rotor_range[1], float(state[2])))
@@ -574,6 +587,8 @@ class SimulatedVehicle:
             rotor_speed_within_limits=rotor_ok,
             within_limits=not reason,
             reason=reason,
+            min_rotor_speed_to_contact=self._rotor_low_to_contact,
+            rotor_held_to_contact=rotor_ok and self._rotor_low_to_contact >= low_limit * omega0 - margin,
         )
         self.history.append((self.time, self.state.copy()))
         self.phase = "landed"
