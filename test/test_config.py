@@ -60,6 +60,8 @@ def _broken(document, path, value):
         (("parameters", "blade_drag_coefficient", "source"), " ", "blade_drag_coefficient.source is empty"),
         (("limits", "max_pitch_angle", "value"), 400.0, "max_pitch_angle.*outside the physical range"),
         (("limits",), KeyError, "missing top-level key: limits"),
+        (("margin_scales", "rotor_floor", "value"), 0.0, "rotor_floor.*outside the physical range"),
+        (("margin_scales", "touchdown_pitch"), KeyError, "missing key.*touchdown_pitch"),
         (("colour",), "red", "unknown top-level key.*colour"),
     ],
 )
@@ -91,6 +93,18 @@ def test_the_papers_reproduction_keeps_the_papers_numbers(uh60_document, tmp_pat
     broken["paper_reproduction"]["limits"]["max_rotor_rpm"] = {"value": 1, "unit": "-", "source": "x"}
     with pytest.raises(ConfigError, match=r"unknown key.*max_rotor_rpm"):
         parse_airframe(broken, where="test.yaml: ")
+
+
+def test_margin_scales_are_configuration_that_leaves_the_aircraft_alone(uh60_document):
+    """The reach-avoid margins' units come from the file (SI on load, a source each); the defaults written out give
+    the airframe of a file without the section, digest included, since they choose among plans, not the aircraft."""
+    uh60 = load_airframe("uh60a_class")
+    assert uh60.margin_scales.touchdown_pitch == pytest.approx(math.radians(8.5))
+    assert dict(uh60.sources)["margin_scales.rotor_floor"].startswith("helireach choice")
+    without = {key: value for key, value in uh60_document.items() if key != "margin_scales"}
+    assert parse_airframe(without).digest() == uh60.digest()
+    steeper = parse_airframe(_broken(uh60_document, ("margin_scales", "rotor_floor", "value"), 0.05))
+    assert steeper.margin_scales.rotor_floor == pytest.approx(0.05) and steeper.digest() != uh60.digest()
 
 
 def test_rotor_speed_limits_must_leave_a_band(uh60_document):

@@ -28,6 +28,7 @@ __all__ = [
     "ConfigError",
     "FlyabilityLimits",
     "LandingLimits",
+    "MarginScales",
     "isa_density",
     "load_airframe",
     "parse_airframe",
@@ -100,6 +101,25 @@ class FlyabilityLimits:
 
 
 @dataclass(frozen=True)
+class MarginScales:
+    """The units of the reach-avoid value's margins (``objective: reach_avoid``): how far from its limit a quantity
+    must be for a margin of −1. They say how the planner weighs one limit against another (a per cent of rotor speed
+    against a foot per second at touchdown), not what the aircraft is: the same states are safe whatever they are.
+
+    The touchdown terms keep J's units (the limits: −1 is a touchdown at zero speeds).
+
+    Attributes:
+        rotor_floor: fraction of Ω₀ above the rotor-speed floor the NLP holds that is a margin of −1.
+        rotor_ceiling: fraction of Ω₀ below the rotor-speed ceiling the NLP holds that is a margin of −1.
+        touchdown_pitch: rad inside the touchdown attitude window's nearer edge that is a margin of −1.
+    """
+
+    rotor_floor: float = 0.15
+    rotor_ceiling: float = 0.15
+    touchdown_pitch: float = math.radians(8.5)
+
+
+@dataclass(frozen=True)
 class Airframe:
     """A helicopter's parameters for the paper's six-state model, all SI.
 
@@ -122,6 +142,8 @@ class Airframe:
             ``flyability`` section; the :class:`FlyabilityLimits` defaults, all assumed, where it is missing).
         rotor_model: the rotor's aerodynamics (inflow, ground effect, induced and profile power; the YAML's
             ``rotor_model`` section; where it is missing, the paper's rotor, which the file was written for).
+        margin_scales: the units of the reach-avoid value's margins (the YAML's optional ``margin_scales``
+            section; the :class:`MarginScales` defaults where it is missing).
         paper_reproduction: ``(section.key, SI value)`` pairs of the YAML's optional ``paper_reproduction``
             section: the numbers the paper's reproduction (:meth:`paper_model`) uses where this file's own differ.
         sources: where each number came from (not part of equality or the hash).
@@ -143,6 +165,7 @@ class Airframe:
     limits: LandingLimits
     flyability: FlyabilityLimits = FlyabilityLimits()
     rotor_model: RotorModel = PAPER_ROTOR_MODEL
+    margin_scales: MarginScales = MarginScales()
     paper_reproduction: tuple[tuple[str, float], ...] = ()
     sources: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
@@ -233,6 +256,8 @@ class Airframe:
             data.pop("paper_reproduction")
         if self.rotor_model.is_paper:
             data.pop("rotor_model")
+        if self.margin_scales == MarginScales():  # as before the section existed: the same digest
+            data.pop("margin_scales")
         data["air_density"] = self.air_density
         data["mass"] = self.mass
         return data
@@ -295,6 +320,11 @@ _FLYABILITY_SCHEMA: dict[str, tuple[str, float, float]] = {
     "collective_full_travel_time": ("time", 0.01, 30.0),
     "commit_height": ("length", 0.0, 100.0),
     "touchdown_min_rotor_speed_ratio": ("dimensionless", 0.1, 1.0),
+}
+_MARGIN_SCALES_SCHEMA: dict[str, tuple[str, float, float]] = {
+    "rotor_floor": ("dimensionless", 0.005, 1.0),
+    "rotor_ceiling": ("dimensionless", 0.005, 1.0),
+    "touchdown_pitch": ("angle", math.radians(0.1), math.radians(45.0)),
 }
 
 
@@ -359,7 +389,10 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
     """
     if not isinstance(document, dict):
         raise ConfigError(f"{where}an airframe file must be a mapping with name, parameters, limits")
-    allowed = {"name", "description", "parameters", "limits", "flyability", "rotor_model", "paper_reproduction"}
+    allowed = {
+        "name", "description", "parameters", "limits", "flyability", "rotor_model", "margin_scales",
+        "paper_reproduction",
+    }  # fmt: skip
     unknown = sorted(set(document) - allowed)
     if unknown:
         raise ConfigError(f"{where}unknown top-level key(s): {', '.join(unknown)}")
@@ -386,6 +419,12 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
         )
     if max(flyability_limits.max_nose_up_pitch, flyability_limits.max_nose_down_pitch) > limits["max_pitch_angle"]:
         raise ConfigError(f"{where}flyability: the pitch limits must lie inside limits.max_pitch_angle")
+    if "margin_scales" in document:
+        scales, scale_sources = _parse_section(document["margin_scales"], _MARGIN_SCALES_SCHEMA, "margin_scales", where)
+        margin_scales = MarginScales(**scales)
+    else:
+        margin_scales = MarginScales()
+        scale_sources = [(f"margin_scales.{key}", "helireach default (assumed)") for key in _MARGIN_SCALES_SCHEMA]
     rotor_model, rotor_sources = _parse_rotor_model(document.get("rotor_model"), where)
     paper_reproduction, paper_sources = _parse_paper_reproduction(document.get("paper_reproduction"), where)
     return Airframe(
@@ -393,8 +432,11 @@ def parse_airframe(document: Any, where: str = "") -> Airframe:
         limits=LandingLimits(**limits),
         flyability=flyability_limits,
         rotor_model=rotor_model,
+        margin_scales=margin_scales,
         paper_reproduction=paper_reproduction,
-        sources=tuple(parameter_sources + limit_sources + flyability_sources + rotor_sources + paper_sources),
+        sources=tuple(
+            parameter_sources + limit_sources + flyability_sources + scale_sources + rotor_sources + paper_sources
+        ),
         **parameters,
     )
 

@@ -60,9 +60,9 @@ class PlannerSettings:
         objective: flyable: ``"terminal"``, the paper's touchdown cost J = max(|y|/y_max, |v|/v_max) − 1 with every
             path limit a hard constraint; or ``"reach_avoid"``, the reach-avoid value: the largest of J and the
             normalised margins of the rotor-speed limits along the path and of the touchdown attitude (each 0 at its
-            limit, −1 at its nominal value; :mod:`~helireach_ros.core.transcription.flyable`), so a plan keeps
-            its worst margin as large as it can instead of riding the limits. The limits stay hard constraints
-            either way, so the same states are safe (value ≤ 0). Other methods: always ``"terminal"``.
+            limit, −1 the airframe's ``margin_scales`` inside it; :mod:`~helireach_ros.core.transcription.flyable`),
+            so a plan keeps its worst margin as large as it can instead of riding the limits. The limits stay hard
+            constraints either way, so the same states are safe (value ≤ 0). Other methods: always ``"terminal"``.
         closed_form_states: verified and flyable: the distance z and the engine power P are not decision
             variables but their collocation solutions in closed form (z the quadrature of v, P the solution
             of Ṗ = −P/τ), which satisfy their collocation equations exactly; neither feeds back into the

@@ -115,14 +115,12 @@ class FlyableTranscription(VerifiedTranscription):
         terminal_scaled = states[:, -1]
         margins = []
         if settings.objective == "reach_avoid":
-            flight_floor = touchdown_low + (flight_low - touchdown_low) * step  # the true floor, without back-off
             # the ceiling the NLP holds: the true limit in the first interval, the back-off after it (bounds below)
             ceiling_backoff = np.full(self.n_states, settings.rotor_speed_backoff)
             ceiling_backoff[: settings.degree] = 0.0
             margins = self._path_margins(
                 rotor_ratio=physical_states[2, :] / omega0,
                 floor=rotor_margin,
-                floor_scale=1.0 - flight_floor,
                 ceiling_backoff=ca.DM(ceiling_backoff).T,
                 touchdown_pitch=breakpoints[1, -1],
             )
@@ -165,24 +163,33 @@ class FlyableTranscription(VerifiedTranscription):
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
         self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
 
-    def _path_margins(self, *, rotor_ratio, floor, floor_scale, ceiling_backoff, touchdown_pitch) -> list:
+    def _path_margins(self, *, rotor_ratio, floor, ceiling_backoff, touchdown_pitch) -> list:
         """The reach-avoid value's path and touchdown margins, each 0 at its limit (as the NLP holds it, back-off
-        included) and −1 at its nominal value.
+        included) and −1 the airframe's :class:`~helireach_ros.core.airframe.MarginScales` inside it.
+
+        .. math:: m_{floor} = -\\frac{\\Omega/\\Omega_0 - r_{floor}}{s_{floor}}, \\quad
+                  m_{ceiling} = \\frac{\\Omega/\\Omega_0 - r_{ceiling}}{s_{ceiling}}, \\quad
+                  m_\\theta = \\frac{|\\theta(T) - \\theta_c| - \\Delta\\theta}{s_\\theta}
+
+        with r the ratios the NLP holds, θ_c and Δθ the centre and half-width of the touchdown window it holds.
 
         Args:
             rotor_ratio: Ω/Ω₀ at the collocation points.
             floor: Ω/Ω₀ minus the rotor floor the NLP holds there (≥ 0 is feasible).
-            floor_scale: 1 minus the true floor there (the margin's unit: −1 at Ω₀).
             ceiling_backoff: the back-off of the rotor ceiling at the points (fraction of Ω₀).
             touchdown_pitch: θ(T), rad.
         """
+        scales = self.airframe.margin_scales
         ceiling = self.airframe.limits.max_rotor_speed_ratio
         low, high = self._touchdown_window()
         centre, half = 0.5 * (low + high), 0.5 * (high - low)
         return [
-            -floor / floor_scale,
-            (rotor_ratio - (ceiling - ceiling_backoff)) / (ceiling - 1.0),
-            ca.vertcat((touchdown_pitch - centre) / half - 1.0, (centre - touchdown_pitch) / half - 1.0),
+            -floor / scales.rotor_floor,
+            (rotor_ratio - (ceiling - ceiling_backoff)) / scales.rotor_ceiling,
+            ca.vertcat(
+                (touchdown_pitch - centre - half) / scales.touchdown_pitch,
+                (centre - touchdown_pitch - half) / scales.touchdown_pitch,
+            ),
         ]
 
     def _touchdown_window(self) -> tuple[float, float]:
