@@ -46,14 +46,17 @@ nlp-cache: $(STAMP)
 
 # The benches behind docs/results/: each writes docs/results/data/<bench>.json (--json), one after another (the
 # numbers are times: never two at once), then bench/results_pages.py regenerates the pages from those records.
-# About 7 minutes on 2 cores; replay_failures.py on a 9 x 7 grid (its default 17 x 13 takes ~12 minutes).
+# About an hour on 2 cores, most of it the Monte Carlo (two objectives, 200 draws, each draw's own landing) and the
+# reach-avoid envelope slice of objective_statuses.py; replay_failures.py on a 9 x 7 grid (its default 17 x 13 takes
+# ~12 minutes).
 bench: $(STAMP) nlp-cache
 	$(BIN)/python bench/plan_latency.py --json
 	$(BIN)/python bench/failure_latency.py --json
 	$(BIN)/python bench/envelope_throughput.py --json
 	$(BIN)/python bench/replay_failures.py --heights 9 --speeds 7 --json
 	$(BIN)/python bench/closed_loop_latency.py --json
-	$(BIN)/python bench/monte_carlo.py --json
+	$(BIN)/python bench/objective_statuses.py --json
+	$(BIN)/python bench/monte_carlo.py --policies disturbance --objectives terminal reach_avoid --truth-check --json
 	$(BIN)/python bench/results_pages.py
 
 clean:
