@@ -126,8 +126,10 @@ def test_without_a_usable_estimate_the_node_plans_for_the_file_weight_and_says_w
         assert values(live[-1])["gross_weight_source"] == "file"
         assert float(values(live[-1])["planned_gross_weight_n"]) == airframe.gross_weight
         harness.failure.publish(Bool(data=True))
-        assert fly_until(harness, 0.0, lambda: bool(refined_plans(statuses)))
-        plan = refined_plans(statuses)[0]
+        # on a slow machine the deadline's fallback (flagged, the envelope's plan) may go out before the first plan
+        planned = lambda: [plan for plan in refined_plans(statuses) if plan["fallback"] == "false"]  # noqa: E731
+        assert fly_until(harness, 0.0, lambda: bool(planned()))
+        plan = planned()[0]
         assert plan["gross_weight_source"] == "file" and reason in plan["gross_weight_reason"], plan
         assert float(plan["planned_gross_weight_n"]) == airframe.gross_weight
     finally:
