@@ -106,6 +106,10 @@ class NodeProcess:
         self.process = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ))
         self.started_at = time.monotonic()
 
+    def log_tail(self, lines: int = 20) -> list[str]:
+        """The last lines the process printed since its latest start."""
+        return (self.folder / f"{self.script}.{self.starts}.log").read_text().splitlines()[-lines:]
+
     def kill(self) -> None:
         self.process.send_signal(signal.SIGKILL)
         self.process.wait(timeout=10.0)
@@ -179,7 +183,12 @@ def test_every_node_killed_mid_descent_recovers_and_the_log_is_recoverable(local
             def fresh_status(up_at=up_at) -> bool:
                 return any(t >= up_at and int(v.get("state_stamp_ns", "0")) > 0 for t, v, _ in observer.safety)
 
-            assert observer.spin_until(fresh_status, RECOVERY_S + 1.0)
+            assert observer.spin_until(fresh_status, RECOVERY_S + 1.0), (
+                f"{name}: no status from a state within {RECOVERY_S + 1.0:g} s of it being up",
+                [(round(t - up_at, 2), v.get("state_stamp_ns"), lvl) for t, v, lvl in observer.safety if t >= up_at],
+                [round(t - up_at, 2) for t, _ in observer.states if t >= up_at][-5:],
+                node.log_tail(),
+            )
             status_at = next(t for t, v, _ in observer.safety if t >= up_at and int(v.get("state_stamp_ns", "0")) > 0)
             recoveries[f"{name} (up -> fresh status)"] = status_at - up_at
             assert status_at - up_at <= RECOVERY_S, recoveries

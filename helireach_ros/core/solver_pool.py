@@ -12,19 +12,24 @@ the NLP built once and warmed up.
   :data:`PRIORITY_LIVE`), first come first served within one priority. With two or more workers, low-priority
   jobs never occupy the last free worker, so a failure plan never waits for a live evaluation.
 - **Supervision.** A worker that dies (any exit) or does not answer within the job's ``timeout_s`` is killed
-  and restarted in the background; the job's future fails with :class:`SolverWorkerError` at once (within one
-  supervision tick, :data:`SUPERVISION_PERIOD_S`, of the death or the timeout), and the caller falls back as it
-  would after a failed solve. :attr:`SolverPool.restarts` counts restarts for diagnostics.
+  and restarted in the background (a worker that has to build the NLP of a job's weight says so, and gets
+  :attr:`SolverPoolSettings.build_timeout_s` for the build before the job's own timeout starts); the job's future
+  fails with :class:`SolverWorkerError` at once (within one supervision tick, :data:`SUPERVISION_PERIOD_S`, of the
+  death or the timeout), and the caller falls back as it would after a failed solve. :attr:`SolverPool.restarts`
+  counts restarts for diagnostics.
 - **Start method.** ``forkserver`` (or ``spawn``), never ``fork``: the parent runs rclpy's threads.
 - **Gross weight**. A request may name the gross weight to plan for (NaN: the airframe's). A worker
   builds that weight's NLP at the first request for it (:func:`~helireach_ros.core.planner.get_planner` caches up
   to 16 per process; the compiled-NLP cache is keyed by the NLP's hash, so a new weight runs on plain CasADi
-  functions) and keeps it. The pool records which weights each worker has answered for
-  (:meth:`SolverPool.ready_weights`). A failure job goes to an idle worker that holds its weight; a live job to one
-  that lacks it, so the workers build a new weight one after the other before any failure. Before a failure only
-  one live job runs at a time and it runs on a worker lacking the weight whenever one is idle, so a weight one ready
-  worker holds finds that worker idle at the failure: no NLP is built in the failure path. A restarted worker holds
-  the airframe's weight only.
+  functions) and keeps it (the airframe's and the 15 most recent others). The pool records which weights each
+  worker holds (:meth:`SolverPool.ready_weights`). A failure job goes to an idle worker that holds its weight; a
+  live job to one that lacks it, so the workers build a new weight one after the other before any failure. Before a
+  failure only one live job runs at a time and it runs on a worker lacking the weight whenever one is idle, so a
+  weight one ready worker holds finds that worker idle at the failure: no NLP is built in the failure path. A worker
+  restarted after it had reported ready builds (and warms up) every weight its predecessor held before it reports
+  ready, so a restart does not put an NLP build in front of the next failure job (a build takes seconds, longer than
+  a failure job's timeout); one that died before it was ready is restarted with the airframe's weight only, so an
+  NLP whose build kills its worker does not restart for ever.
 """
 
 from __future__ import annotations
@@ -70,6 +75,9 @@ QUEUE_WAIT_LIMIT_S = 60.0
 """Longest :meth:`SolverPool.plan` waits for a worker to take its job (a restart takes a few seconds), s."""
 
 _READY = b"ready"
+_BUILDING = b"building"  # the worker builds the NLP of a job's weight (build_timeout_s applies)
+_BUILT = b"built"  # ... and has built it: the job's solve starts now
+_HELD_WEIGHTS = 15  # a worker keeps the NLPs of this many recent weights besides the airframe's (get_planner: 16)
 _STOP = b"stop"
 
 
@@ -86,20 +94,26 @@ class SolverPoolSettings:
         start_method: ``"forkserver"`` or ``"spawn"`` (``fork`` is refused: the parent may run threads).
         warm_up: each worker solves one landing before it reports ready (first-call costs).
         default_timeout_s: a job's timeout when the caller gives none, s.
+        build_timeout_s: longest a worker may take to build the NLP of a gross weight it does not hold yet before
+            the job's own timeout starts, s (a build on plain CasADi functions takes seconds; a job's timeout is
+            sized for a solve).
     """
 
     workers: int = 2
     start_method: str = "forkserver"
     warm_up: bool = True
     default_timeout_s: float = 5.0
+    build_timeout_s: float = 120.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.workers, int) or self.workers < 1:
             raise ValueError(f"workers must be an integer >= 1, got {self.workers!r}")
         if self.start_method not in ("forkserver", "spawn"):
             raise ValueError(f"start_method must be 'forkserver' or 'spawn', got {self.start_method!r}")
-        if not (np.isfinite(self.default_timeout_s) and self.default_timeout_s > 0.0):
-            raise ValueError(f"default_timeout_s must be > 0, got {self.default_timeout_s!r}")
+        for name in ("default_timeout_s", "build_timeout_s"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0.0):
+                raise ValueError(f"{name} must be > 0, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -124,21 +138,42 @@ class _SolveReply:
     error: str
 
 
-def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSettings, warm_up: bool) -> None:
-    """A worker: builds the NLP, warms it up, then answers requests until told to stop or the pipe closes."""
+def _worker_main(
+    connection: Connection,
+    airframe: Airframe,
+    settings: PlannerSettings,
+    warm_up: bool,
+    gross_weights: tuple[float, ...] = (),
+) -> None:
+    """A worker: builds the NLP (and one for each of ``gross_weights``, N), warms them up, then answers requests
+    until told to stop or the pipe closes."""
     from helireach_ros.core.live_reachability import solve_with_cold_check
     from helireach_ros.core.model import initial_state_after_failure
     from helireach_ros.core.planner import get_planner
 
     planner = get_planner(airframe, settings)
 
-    def planner_for(gross_weight: float) -> Any:  # built at the first request for a weight, then cached
+    held: dict[float, None] = {}  # the recent weights, oldest first: a subset of get_planner's cache
+
+    def planner_for(gross_weight: float, announce: bool = False) -> Any:  # built at the first request, then cached
         if math.isnan(gross_weight) or gross_weight == airframe.gross_weight:
             return planner
-        return get_planner(airframe.with_conditions(gross_weight=gross_weight), settings)
+        building = gross_weight not in held
+        if building and announce:
+            connection.send_bytes(_BUILDING)
+        weight_planner = get_planner(airframe.with_conditions(gross_weight=gross_weight), settings)
+        held.pop(gross_weight, None)
+        held[gross_weight] = None
+        while len(held) > _HELD_WEIGHTS:
+            held.pop(next(iter(held)))
+        if building and announce:
+            connection.send_bytes(_BUILT)
+        return weight_planner
 
-    if warm_up:
-        planner.plan(initial_state_after_failure(airframe, 150.0, 38.0))
+    for gross_weight in (math.nan, *gross_weights):
+        built = planner_for(gross_weight)
+        if warm_up:
+            built.plan(initial_state_after_failure(airframe, 150.0, 38.0))
     connection.send_bytes(_READY)
     while True:
         try:
@@ -150,7 +185,7 @@ def _worker_main(connection: Connection, airframe: Airframe, settings: PlannerSe
         try:
             request = decode_dataclass(_SolveRequest, data)
             solve = functools.partial(
-                planner_for(request.gross_weight).plan,
+                planner_for(request.gross_weight, announce=True).plan,
                 initial_control=request.initial_control,
                 reaction_delay_s=request.reaction_delay_s,
                 disturbance=request.disturbance,
@@ -171,23 +206,60 @@ class _Job:
     future: Future
     timeout_s: float
     priority: int
-    started: float = 0.0
+    started: float = 0.0  # when the solve's clock started (assigned, or its NLP built), monotonic s
     gross_weight: float = math.nan
+    building: bool = False  # its worker said it builds the NLP of its weight (build_timeout_s applies)
+
+    def deadline(self, build_timeout_s: float) -> float:
+        """When the worker running this job is deemed hung, monotonic s."""
+        return self.started + (build_timeout_s if self.building else self.timeout_s)
 
 
 class _Worker:
     """One worker process and the parent's end of its pipe."""
 
-    def __init__(self, context: Any, airframe: Airframe, settings: PlannerSettings, warm_up: bool) -> None:
+    def __init__(
+        self,
+        context: Any,
+        airframe: Airframe,
+        settings: PlannerSettings,
+        warm_up: bool,
+        gross_weights: tuple[float, ...] = (),
+    ) -> None:
         self.connection, child = context.Pipe(duplex=True)
+        extra = tuple(weight for weight in gross_weights if weight != airframe.gross_weight)[-_HELD_WEIGHTS:]
         self.process = context.Process(
-            target=_worker_main, args=(child, airframe, settings, warm_up), name="helireach_solver", daemon=True
+            target=_worker_main, args=(child, airframe, settings, warm_up, extra), name="helireach_solver", daemon=True
         )
         self.process.start()
         child.close()
         self.ready = False
         self.job: _Job | None = None
-        self.weights = {airframe.gross_weight}  # gross weights this worker has answered for (its NLPs)
+        self._airframe_weight = airframe.gross_weight
+        self._recent = dict.fromkeys(extra)  # the other weights it holds, oldest first (as the worker's own record)
+        self._lock = threading.Lock()
+
+    @property
+    def weights(self) -> set[float]:
+        """Gross weights whose NLPs this worker holds, N."""
+        with self._lock:
+            return {self._airframe_weight, *self._recent}
+
+    @property
+    def recent_weights(self) -> tuple[float, ...]:
+        """The weights other than the airframe's it holds, oldest first (what a replacement builds)."""
+        with self._lock:
+            return tuple(self._recent)
+
+    def hold(self, gross_weight: float) -> None:
+        """Records that the worker built or used the NLP of ``gross_weight`` (N), as the worker records it."""
+        if gross_weight == self._airframe_weight:
+            return
+        with self._lock:
+            self._recent.pop(gross_weight, None)
+            self._recent[gross_weight] = None
+            while len(self._recent) > _HELD_WEIGHTS:
+                self._recent.pop(next(iter(self._recent)))
 
     def kill(self) -> None:
         if self.process.is_alive():
@@ -309,7 +381,7 @@ class SolverPool:
             return sum(worker.ready and worker.process.is_alive() for worker in self._workers)
 
     def ready_weights(self, every: bool = False) -> set[float]:
-        """Gross weights (N) some ready worker has answered for (``every``: every ready worker): a failure job for
+        """Gross weights (N) some ready worker holds the NLP of (``every``: every ready worker): a failure job for
         one of them goes to a worker that holds it (module docstring). The airframe's weight when none is ready."""
         with self._lock:
             held = [worker.weights for worker in self._workers if worker.ready and worker.process.is_alive()]
@@ -346,8 +418,8 @@ class SolverPool:
         self.close()
 
     # -- dispatcher thread -----------------------------------------------------------------------------------
-    def _start_worker(self) -> _Worker:
-        return _Worker(self._context, self.airframe, self.settings, self.pool_settings.warm_up)
+    def _start_worker(self, gross_weights: tuple[float, ...] = ()) -> _Worker:
+        return _Worker(self._context, self.airframe, self.settings, self.pool_settings.warm_up, gross_weights)
 
     def _wake(self) -> None:
         try:
@@ -390,8 +462,10 @@ class SolverPool:
         return (matching or idle)[-1]
 
     def _replace(self, worker: _Worker, reason: str) -> None:
-        """Kills a dead or hung worker, fails its job, starts a new one (ready later, in the background)."""
+        """Kills a dead or hung worker, fails its job, starts a new one (ready later, in the background) holding the
+        weights the old one held if it had been ready (module docstring)."""
         job = worker.job
+        inherited = worker.recent_weights if worker.ready else ()
         worker.job = None
         worker.kill()
         self.restarts += 1
@@ -399,7 +473,7 @@ class SolverPool:
         if job is not None:
             job.future.set_exception(SolverWorkerError(f"{reason}; the worker was restarted"))
         if not self._closed:
-            replacement = self._start_worker()
+            replacement = self._start_worker(inherited)
             with self._lock:
                 self._workers[self._workers.index(worker)] = replacement
 
@@ -450,6 +524,12 @@ class SolverPool:
                 with self._lock:
                     worker.ready = True
                 return
+            if data in (_BUILDING, _BUILT):
+                if worker.job is not None:  # the job's clock restarts: for the build, then for the solve
+                    worker.job.started, worker.job.building = time.monotonic(), data == _BUILDING
+                    if data == _BUILT:
+                        worker.hold(worker.job.gross_weight)
+                return
             if data is not None and worker.job is not None:
                 job, worker.job = worker.job, None
                 try:
@@ -460,17 +540,16 @@ class SolverPool:
                 if reply.plan is None:
                     job.future.set_exception(ValueError(reply.error))
                 else:
-                    with self._lock:
-                        worker.weights.add(job.gross_weight)
+                    worker.hold(job.gross_weight)
                     job.future.set_result(reply.plan)
                 return
         if not worker.process.is_alive():
             self._replace(worker, f"solver worker {worker.process.pid} died (exit code {worker.process.exitcode})")
-        elif worker.job is not None and now - worker.job.started > worker.job.timeout_s:
-            self._replace(
-                worker,
-                f"solver worker {worker.process.pid} gave no answer within {worker.job.timeout_s:g} s",
-            )
+        elif worker.job is not None and now > worker.job.deadline(self.pool_settings.build_timeout_s):
+            limit = f"{worker.job.timeout_s:g} s"
+            if worker.job.building:
+                limit = f"{self.pool_settings.build_timeout_s:g} s building the NLP of its weight"
+            self._replace(worker, f"solver worker {worker.process.pid} gave no answer within {limit}")
 
     def _stop_all(self) -> None:
         with self._lock:
