@@ -14,6 +14,7 @@ import pytest
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.simulation import Scenario, SimulatedVehicle, load_scenario
+from helireach_ros.core.units import FT, KT
 
 
 @pytest.fixture(scope="module")
@@ -97,3 +98,39 @@ def test_the_rotor_is_judged_until_ground_contact_as_well_as_until_the_touchdown
     floor = airframe.flyability.touchdown_min_rotor_speed_ratio * omega0
     assert touchdown.min_rotor_speed_to_contact < floor
     assert not touchdown.rotor_held_to_contact and not touchdown.within_limits_to_contact
+
+
+class _StartRecorder:
+    """The planner, with the vehicle time and the initial state of every plan it is asked for noted."""
+
+    def __init__(self, planner, vehicle) -> None:
+        self.inner, self.vehicle = planner, vehicle
+        self.airframe, self.settings = planner.airframe, planner.settings
+        self.starts: list[tuple[float, np.ndarray]] = []
+
+    def plan(self, state, *arguments, **keywords):
+        self.starts.append((self.vehicle.time, np.array(state, dtype=float)))
+        return self.inner.plan(state, *arguments, **keywords)
+
+
+def test_with_latency_compensation_a_re_plan_starts_where_the_vehicle_is_when_it_arrives(airframe, settings) -> None:
+    """0.3 s of plan latency, an exact model and exact sensors: compensated, every re-plan starts from the state
+    the vehicle is in when the plan reaches it (the current plan flown ahead in the model); uncompensated, from the
+    state 0.3 s earlier (tens of feet away in the descent)."""
+    latency = 0.3
+    scenario = Scenario(name="exact", height=500 * FT, forward_speed=75 * KT)
+    miss_ft = {}
+    for compensate in (False, True):
+        vehicle = SimulatedVehicle(scenario, airframe, settings)
+        recorder = _StartRecorder(get_planner(airframe, settings), vehicle)
+        policy = ClosedLoopSettings(latency=latency, compensate_latency=compensate)
+        result = fly_closed_loop(vehicle, recorder, policy)
+        assert result.touchdown.within_limits, result.touchdown.reason
+        times = np.array([time for time, _ in vehicle.history])
+        heights = np.array([state[3] for _, state in vehicle.history])
+        replans = recorder.starts[1:]  # the failure plan starts from the trim, after its reaction delay
+        assert len(replans) >= 20
+        miss_ft[compensate] = max(
+            abs(state[3] - np.interp(time + latency, times, heights)) / FT for time, state in replans
+        )
+    assert miss_ft[True] < 0.5 and miss_ft[False] > 5.0, miss_ft

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
+from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker, predict_state
 from helireach_ros.core.estimation import estimate_gross_weight
 from helireach_ros.core.landing_supervisor import plan_time_remaining, replanning_ends
 from helireach_ros.core.model import clip_rotor_speed_noise, state_from_sensors
@@ -50,7 +50,13 @@ class ClosedLoopSettings:
         estimate_disturbance: re-plan for the model plus the disturbance accelerations learnt from the
             prediction error of each re-planning interval (:mod:`helireach_ros.core.disturbance`); on, as in the
             planner node.
-        disturbance: how that estimate is made.
+        compensate_latency: a re-plan starts ``latency`` s after its measurement: from the state the planner's
+            model (with the disturbance estimate) predicts along the current plan for that long, with the control
+            the current plan flies then. Off by default, as in the planner node: measured in
+            ``bench/monte_carlo.py --policies disturbance+latency`` without a significant change of the landing
+            rate (docs/method/planning.md).
+        disturbance: how that estimate is made (with ``estimate_disturbance``, plans start from its filtered
+            state, the measurement itself at its default state gain of 1).
     """
 
     replan_period: float = 0.25
@@ -60,6 +66,7 @@ class ClosedLoopSettings:
     rotor_noise_tolerance: float = 0.01
     estimate_weight: bool = False
     estimate_disturbance: bool = True
+    compensate_latency: bool = False
     disturbance: DisturbanceSettings = field(default_factory=DisturbanceSettings)
 
     def __post_init__(self) -> None:
@@ -98,6 +105,29 @@ def measured_state(measurement: Measurement, vehicle: SimulatedVehicle, rotor_no
     )
 
 
+def _flown_ahead(
+    planner: LandingPlanner,
+    state: np.ndarray,
+    current: tuple[float, LandingPlan],
+    now: float,
+    duration: float,
+    disturbance: np.ndarray,
+) -> np.ndarray:
+    """The state ``duration`` s after ``now`` in the planner's model plus the disturbance, flying the current plan
+    (started at ``current[0]``); the state itself where the model cannot be integrated."""
+    started, plan = current
+
+    def controls_at(time: float) -> np.ndarray:
+        return plan.controls_at([time])[:, 0]
+
+    try:
+        ahead = predict_state(planner.airframe, state, controls_at, now - started, duration, disturbance)
+    except RuntimeError:
+        return state
+    ahead[5] = 0.0  # the energy state P starts at 0 in every plan
+    return ahead
+
+
 def fly_closed_loop(
     vehicle: SimulatedVehicle, planner: LandingPlanner, settings: ClosedLoopSettings | None = None
 ) -> ClosedLoopResult:
@@ -133,14 +163,21 @@ def fly_closed_loop(
             state = measured_state(vehicle.measure(), vehicle, settings.rotor_noise_tolerance)
             if settings.estimate_disturbance:
                 disturbance = tracker.update(now, state, vehicle.flown_controls)
-            remaining = plan_time_remaining(current[1].time_to_land, now - current[0]) if current else math.inf
+                filtered = tracker.state  # the measurement itself with a state gain of 1
+                state = state if filtered is None else filtered
+            # a re-plan starts where the vehicle will be when it reaches it: the measurement flown ahead along the
+            # current plan for the latency (in the planner's model with the disturbance estimate)
+            starts = now + settings.latency if settings.compensate_latency and current is not None else now
+            if current is not None and starts > now:
+                state = _flown_ahead(planner, state, current, now, starts - now, disturbance)
+            remaining = plan_time_remaining(current[1].time_to_land, starts - current[0]) if current else math.inf
             if replanning_ends(state[3], remaining, settings.min_height, settings.min_remaining):
                 replanning = False
             else:
                 if current is None:  # the failure plan: from the trim flown before, after the reaction delay
                     plan = planner.plan(state)
-                else:  # a re-plan: from the control being flown now (continuous), no reaction delay
-                    flying = current[1].controls_at([now - current[0]])[:, 0]
+                else:  # a re-plan: from the control being flown when it starts (continuous), no reaction delay
+                    flying = current[1].controls_at([starts - current[0]])[:, 0]
                     plan = planner.plan(
                         state, current[1].warm_start, initial_control=flying, reaction_delay_s=0.0,
                         disturbance=disturbance,
@@ -148,8 +185,8 @@ def fly_closed_loop(
                 if plan.solver.success:
                     plans += 1
                     unsafe += not plan.safe
-                    current = (now, plan)
-                    pending.append((now + settings.latency, ControlSchedule.from_plan(plan, now)))
+                    current = (starts, plan)
+                    pending.append((now + settings.latency, ControlSchedule.from_plan(plan, starts)))
                 else:
                     failed += 1
         next_tick = now + settings.replan_period

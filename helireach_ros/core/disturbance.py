@@ -17,6 +17,16 @@ rotor reaches its limit and no plan is feasible (measured in :mod:`helireach_ros
 corners). Sensor noise enters d̂ as σ√2 / Δt, damped by g; the estimate is clipped to
 :data:`~helireach_ros.core.planner.MAX_DISTURBANCE`.
 
+**Filtered state.** With a state gain α < 1 the tracker is an α–β observer (Kalata 1984; the steady-state
+Kalman filter of a measured quantity and its constant rate): the prediction starts from the previous *estimate*
+x̂ rather than the previous measurement, and each measurement z corrects both,
+
+.. math:: \\hat x \\leftarrow \\hat x^- + \\alpha\\,(z - \\hat x^-), \\qquad
+          \\hat d \\leftarrow \\hat d + g\\,\\frac{(z - \\hat x^-)_{y, v, \\Omega}}{\\Delta t},
+
+so sensor noise no longer enters d̂ twice per interval and the next plan starts from x̂ instead of a raw sample.
+α = 1 is the plain filter above (x̂ = z).
+
 The plans made for d̂ are judged by their replay in the same disturbed model: ``safe`` then means "safe in
 the model corrected by what this flight has shown", which is what the plan is flown in.
 """
@@ -37,6 +47,7 @@ __all__ = ["DisturbanceSettings", "DisturbanceTracker", "predict_state", "update
 
 _PREDICTION_SEGMENTS = 5  # the flown control is sampled at 6 times over the interval, linear in between
 _PREDICTION_SAMPLES = 2
+_MEASURED = 5  # y, v, Ω, h, z are measured and filtered; the energy state P is not (the planner's input keeps it)
 
 
 @dataclass(frozen=True)
@@ -47,15 +58,20 @@ class DisturbanceSettings:
         gain: g, the fraction of each interval's prediction error taken into the estimate (1: the last
             interval's error alone; smaller: averaged over ~1/g intervals, less sensor noise). 0.3 by measurement
             (``bench/monte_carlo.py --policies disturbance --disturbance-gain G``; docs/method/envelopes.md).
+        state_gain: α, the fraction of each prediction error taken into the state estimate the next plan starts
+            from (1: the measurement itself; smaller: an α–β observer, less sensor noise in both estimates).
         relative_tolerance: of the prediction's integrator.
     """
 
     gain: float = 0.3
+    state_gain: float = 1.0
     relative_tolerance: float = 1e-6
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.gain) and 0.0 < self.gain <= 1.0):
-            raise ValueError(f"gain must lie in (0, 1], got {self.gain!r}")
+        for name in ("gain", "state_gain"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0.0 < value <= 1.0):
+                raise ValueError(f"{name} must lie in (0, 1], got {value!r}")
 
 
 def predict_state(
@@ -108,26 +124,46 @@ def updated_disturbance(
         The new estimate; the old one where the prediction cannot be made (a non-finite state, an
         integrator failure), so a bad interval never makes the estimate worse than it was.
     """
-    settings = settings or DisturbanceSettings()
+    return _observed(
+        airframe, estimate, previous_state, measured_state, controls_at, start_time, duration,
+        settings or DisturbanceSettings(),
+    )[0]  # fmt: skip
+
+
+def _observed(
+    airframe: Airframe,
+    estimate: np.ndarray,
+    previous_state: np.ndarray,
+    measured_state: np.ndarray,
+    controls_at: Callable[[float], np.ndarray],
+    start_time: float,
+    duration: float,
+    settings: DisturbanceSettings,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(d̂, x̂) after one interval: ``previous_state`` is the previous x̂ (the previous measurement with α = 1)."""
     estimate = np.asarray(estimate, dtype=float).reshape(3)
     if not (math.isfinite(duration) and duration > 0.0):
         raise ValueError(f"duration must be > 0, got {duration!r}")
     measured = np.asarray(measured_state, dtype=float)[:6]
     if not (np.all(np.isfinite(previous_state[:6])) and np.all(np.isfinite(measured))):
-        return estimate
+        return estimate, measured.copy()
     try:
         predicted = predict_state(
             airframe, previous_state, controls_at, start_time, duration, estimate, settings.relative_tolerance
         )
     except RuntimeError:
-        return estimate
-    innovation = (measured[:3] - predicted[:3]) / duration
-    return np.clip(estimate + settings.gain * innovation, -MAX_DISTURBANCE, MAX_DISTURBANCE)
+        return estimate, measured.copy()
+    error = measured - predicted
+    filtered = measured.copy()
+    filtered[:_MEASURED] -= (1.0 - settings.state_gain) * error[:_MEASURED]  # x̂⁻ + α (z − x̂⁻); z exactly at α = 1
+    learnt = np.clip(estimate + settings.gain * error[:3] / duration, -MAX_DISTURBANCE, MAX_DISTURBANCE)
+    return learnt, filtered
 
 
 class DisturbanceTracker:
     """The estimate d̂ of one descent, fed with each re-planning tick's measurement (the planner node's and the
-    lock-step closed loop's policy alike).
+    lock-step closed loop's policy alike); with ``state_gain`` < 1 also the filtered state x̂ the next plan starts
+    from (see the module docstring).
 
     Args:
         airframe: the planner's model.
@@ -140,20 +176,27 @@ class DisturbanceTracker:
         self.estimate = np.zeros(3)
         self._previous: tuple[float, np.ndarray] | None = None
 
+    @property
+    def state(self) -> np.ndarray | None:
+        """x̂, the filtered state at the latest measurement (SI, 6; the measurement itself with ``state_gain``
+        1); None before the first."""
+        return None if self._previous is None else self._previous[1].copy()
+
     def update(self, time: float, state: np.ndarray, controls_at: Callable[[float], np.ndarray]) -> np.ndarray:
         """Takes the measurement at ``time`` (s) and the controls flown since the previous one; returns d̂.
 
         The first measurement of a descent only starts the interval; one not later than the previous one (a
         repeated or out-of-order stamp) is ignored.
         """
-        state = np.asarray(state, dtype=float)[:6].copy()
-        if self._previous is not None and time > self._previous[0]:
+        measured = np.asarray(state, dtype=float)[:6].copy()
+        if self._previous is None:
+            self._previous = (time, measured)
+        elif time > self._previous[0]:
             start, previous = self._previous
-            self.estimate = updated_disturbance(
-                self.airframe, self.estimate, previous, state, controls_at, start, time - start, self.settings
+            self.estimate, filtered = _observed(
+                self.airframe, self.estimate, previous, measured, controls_at, start, time - start, self.settings
             )
-        if self._previous is None or time > self._previous[0]:
-            self._previous = (time, state)
+            self._previous = (time, filtered)
         return self.estimate.copy()
 
     def reset(self) -> None:
