@@ -3,7 +3,8 @@
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
      [--policies none weight disturbance weight+disturbance ...] [--objectives terminal reach_avoid]
-     [--replan-periods 0.25 0.1] [--truth-check] [--json]
+     [--replan-periods 0.25 0.1] [--state-gains 1 0.5] [--planner-models nominal truth] [--noise set none]
+     [--truth-check] [--json]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -38,10 +39,21 @@ Re-planning policies (``--policies``, each ``none`` or a ``+``-joined set; every
 margin setting, on the same draws): ``weight``: plan for the gross weight estimated from the engine power of
 the steady flight before the failure (:mod:`helireach_ros.core.estimation`, which also absorbs the drag and
 c_d errors into that weight); ``disturbance``: re-plan for the model plus the disturbance accelerations
-learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.disturbance`).
+learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.disturbance`); ``latency``: each
+re-plan starts from the current plan flown ahead in the model for the latency
+(:attr:`~helireach_ros.core.closed_loop.ClosedLoopSettings.compensate_latency`). ``--state-gains``: the disturbance
+estimate's state gain α (below 1 an α–β observer whose filtered state the plans start from).
 
 Re-planning periods (``--replan-periods``): s between re-plans (the planner node's ``replan_period``); each is run
 with every objective, policy and margin setting, on the same draws.
+
+Planner models (``--planner-models``): ``nominal`` (the planner keeps the airframe file's model, as the nodes do)
+or ``truth``, an oracle that plans with each run's true model (drawn parameters and density altitude) and still
+meets its latency and sensor noise. The oracle is no policy the package could fly; it bounds what any estimation of
+the model can buy: what it loses is lost to latency, noise, the mesh and the re-planning itself.
+
+Sensor noise (``--noise``): ``set`` (the uncertainty set's) or ``none`` (exact measurements, the same draws):
+what the noise alone costs.
 
 Objectives (``--objectives``, the planner settings' ``objective``; each is run with every policy and margin
 setting, on the same draws): ``terminal`` (the touchdown cost, limits hard) or ``reach_avoid`` (the worst
@@ -52,6 +64,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import itertools
 import math
 import multiprocessing
 import time
@@ -152,7 +165,10 @@ def _context(uncertainty_file: str) -> tuple[Airframe, PlannerSettings, Uncertai
     return load_airframe("uh60a_class"), load_settings(None), load_uncertainty_set(uncertainty_file)
 
 
-POLICY_PARTS = {"weight": "estimate_weight", "disturbance": "estimate_disturbance"}
+PLANNER_MODELS = ("nominal", "truth")
+"""``--planner-models``: the airframe file's model (as the nodes plan) or each run's true model (an oracle)."""
+
+POLICY_PARTS = {"weight": "estimate_weight", "disturbance": "estimate_disturbance", "latency": "compensate_latency"}
 """``--policies`` words and the :class:`ClosedLoopSettings` switch each turns on."""
 
 
@@ -166,13 +182,15 @@ def parse_policy(text: str) -> str:
 
 
 def closed_loop_settings(
-    policy: str, latency: float, disturbance_gain: float, replan_period: float = ClosedLoopSettings().replan_period
+    policy: str, latency: float, disturbance_gain: float, replan_period: float = ClosedLoopSettings().replan_period,
+    state_gain: float = DisturbanceSettings().state_gain,
 ) -> ClosedLoopSettings:
     """The re-planning policy of a run."""
     parts = [] if policy == "none" else policy.split("+")
     switches = {switch: part in parts for part, switch in POLICY_PARTS.items()}  # each one explicit
     return ClosedLoopSettings(
-        latency=latency, replan_period=replan_period, disturbance=DisturbanceSettings(gain=disturbance_gain),
+        latency=latency, replan_period=replan_period,
+        disturbance=DisturbanceSettings(gain=disturbance_gain, state_gain=state_gain),
         **switches,
     )  # fmt: skip
 
@@ -193,6 +211,8 @@ class Flight:
     disturbance_gain: float
     objective: str | None = None
     replan_period: float = ClosedLoopSettings().replan_period
+    planner_model: str = "nominal"
+    state_gain: float = DisturbanceSettings().state_gain
 
 
 def _settings(flight: Flight) -> tuple[Airframe, PlannerSettings]:
@@ -203,14 +223,17 @@ def _settings(flight: Flight) -> tuple[Airframe, PlannerSettings]:
 def fly(flight: Flight) -> dict:
     """One closed-loop landing (a worker process's job)."""
     airframe, settings = _settings(flight)
-    planner = get_planner(flight.margin.planning_airframe(airframe), settings)
+    planning = flight.model.airframe(airframe) if flight.planner_model == "truth" else airframe
+    planner = get_planner(flight.margin.planning_airframe(planning), settings)
     scenario = Scenario(
         name="monte_carlo", height=flight.height_ft * FT, forward_speed=flight.speed_kt * KT, noise=flight.noise,
         seed=flight.noise_seed,
     )  # fmt: skip
     vehicle = model_vehicle(scenario, flight.model, airframe, settings)  # judged against the true limits
     started = time.perf_counter()
-    policy = closed_loop_settings(flight.policy, flight.model.latency, flight.disturbance_gain, flight.replan_period)
+    policy = closed_loop_settings(
+        flight.policy, flight.model.latency, flight.disturbance_gain, flight.replan_period, flight.state_gain
+    )
     result = fly_closed_loop(vehicle, planner, policy)
     report = result.touchdown
     omega0 = airframe.nominal_rotor_speed
@@ -404,6 +427,18 @@ def main() -> None:
         "--replan-periods", type=float, nargs="+", default=[ClosedLoopSettings().replan_period],
         help="s between re-plans (each is run with every objective, policy and margin setting)",
     )  # fmt: skip
+    parser.add_argument(
+        "--state-gains", type=float, nargs="+", default=[DisturbanceSettings().state_gain],
+        help="the disturbance observer's state gain alpha (1: plan from the raw measurement)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--noise", nargs="+", choices=("set", "none"), default=["set"],
+        help="the uncertainty set's sensor noise or exact measurements (each is run with every other setting)",
+    )
+    parser.add_argument(
+        "--planner-models", nargs="+", choices=PLANNER_MODELS, default=["nominal"],
+        help="what the planner knows: the file's model or (an oracle) each run's true one",
+    )  # fmt: skip
     add_json_argument(parser)
     arguments = parser.parse_args()
     record = Record.start()
@@ -428,11 +463,15 @@ def main() -> None:
     }  # fmt: skip
     file_objective = _context(arguments.uncertainty)[1].objective
 
-    def flights(margin: Margin, policy: str, objective: str, replan_period: float) -> list[Flight]:
+    def flights(
+        margin: Margin, policy: str, objective: str, replan_period: float, planner_model: str = "nominal",
+        state_gain: float = DisturbanceSettings().state_gain, noise: str = "set",
+    ) -> list[Flight]:
+        sensor_noise = uncertainty.sensor_noise if noise == "set" else SensorNoise()
         return [
             Flight(arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
-                   uncertainty.sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain, objective,
-                   replan_period)
+                   sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain, objective,
+                   replan_period, planner_model, state_gain)
             for seed in seeds
         ]  # fmt: skip
 
@@ -444,20 +483,27 @@ def main() -> None:
             own_model_landing,
         )  # fmt: skip
         print(f"truth check of the {len(seeds)} draws: wall {time.perf_counter() - started:.0f} s")
-    for objective in arguments.objectives:
-        objective = objective or file_objective
-        for replan_period in arguments.replan_periods:
-            for policy in arguments.policies:
-                for margin in arguments.margins:
-                    started = time.perf_counter()
-                    print(f"\n== objective {objective}, a re-plan every {replan_period:g} s ==")
-                    results = run_tasks(flights(margin, policy, objective, replan_period), arguments.workers)
-                    results = [{**truth, **result} for truth, result in zip(truths, results, strict=True)]
-                    setting = report(policy, margin, states, seeds, draws, results, airframe, uncertainty)
-                    setting.update(objective=objective, replan_period_s=replan_period)
-                    setting["wall_s"] = time.perf_counter() - started
-                    numbers["settings"].append(setting)
-                    print(f"wall {setting['wall_s']:.0f} s; load average {loadavg_text()}")
+    settings = itertools.product(
+        arguments.noise, arguments.planner_models, [objective or file_objective for objective in arguments.objectives],
+        arguments.replan_periods, arguments.state_gains, arguments.policies, arguments.margins,
+    )  # fmt: skip
+    for noise, planner_model, objective, replan_period, state_gain, policy, margin in settings:
+        started = time.perf_counter()
+        print(
+            f"\n== planner model {planner_model}, objective {objective}, a re-plan every {replan_period:g} s, "
+            f"state gain {state_gain:g}, sensor noise {noise} =="
+        )
+        flown = flights(margin, policy, objective, replan_period, planner_model, state_gain, noise)
+        results = run_tasks(flown, arguments.workers)
+        results = [{**truth, **result} for truth, result in zip(truths, results, strict=True)]
+        setting = report(policy, margin, states, seeds, draws, results, airframe, uncertainty)
+        setting.update(
+            objective=objective, replan_period_s=replan_period, planner_model=planner_model, state_gain=state_gain,
+            sensor_noise=noise,
+        )
+        setting["wall_s"] = time.perf_counter() - started
+        numbers["settings"].append(setting)
+        print(f"wall {setting['wall_s']:.0f} s; load average {loadavg_text()}")
     if not arguments.no_weight_check:
         numbers["weight_check"] = weight_check(arguments)
     print(f"load average at the end {loadavg_text()}")

@@ -318,6 +318,12 @@ def monte_carlo(numbers: Mapping) -> str:
         heading = f"### Objective `{setting.get('objective', 'terminal')}`"
         if "replan_period_s" in setting:
             heading += f", a re-plan every {setting['replan_period_s']:g} s"
+        if setting.get("planner_model", "nominal") != "nominal":
+            heading += f", planner model `{setting['planner_model']}`"
+        if setting.get("state_gain", 1.0) != 1.0:
+            heading += f", state gain {setting['state_gain']:g}"
+        if setting.get("sensor_noise", "set") != "set":
+            heading += f", sensor noise `{setting['sensor_noise']}`"
         parts.append(
             f"{heading}; policy `{setting['policy']}`, margins: {setting['margins']}\n\n"
             + _table(["initial state", "envelope margin ft/kt", "within limits", "rate", "95 % Wilson interval",
