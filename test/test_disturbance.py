@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker, predict_state, updated_disturbance
+from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker, observe_interval, predict_state
 from helireach_ros.core.model import disturbed_dynamics_function, dynamics_function, initial_state_after_failure
 from helireach_ros.core.planner import get_planner
 from helireach_ros.core.robust_verification import model_vehicle
@@ -85,9 +85,9 @@ def test_one_interval_with_gain_one_recovers_a_constant_disturbance(airframe, fa
         return np.array([0.004 + 0.002 * time, -0.05 - 0.1 * time])
 
     measured = _true_flight(airframe, failure_state, controls_at, TRUE_DISTURBANCE)
-    estimate = updated_disturbance(
+    estimate = observe_interval(
         airframe, np.zeros(3), failure_state, measured, controls_at, 0.0, INTERVAL_S, DisturbanceSettings(gain=1.0)
-    )
+    ).disturbance
     # one step is ~5 % short (the disturbance changes y, and the drag and inflow damp it within the interval);
     # repeated intervals remove that (the next test), as the fixed point is the true d
     assert estimate == pytest.approx(TRUE_DISTURBANCE, rel=0.1)
@@ -101,7 +101,9 @@ def test_a_smaller_gain_converges_over_intervals_and_never_overshoots(airframe, 
     estimate, state, errors = np.zeros(3), failure_state, []
     for _ in range(8):
         measured = _true_flight(airframe, state, controls_at, TRUE_DISTURBANCE)
-        estimate = updated_disturbance(airframe, estimate, state, measured, controls_at, 0.0, INTERVAL_S, settings)
+        estimate = observe_interval(
+            airframe, estimate, state, measured, controls_at, 0.0, INTERVAL_S, settings
+        ).disturbance
         errors.append(float(np.max(np.abs(estimate - TRUE_DISTURBANCE))))
         assert np.all(estimate / TRUE_DISTURBANCE <= 1.05)  # approaches from zero, never beyond the truth
         state = measured
@@ -117,10 +119,10 @@ def test_a_bad_interval_leaves_the_estimate_alone(airframe, failure_state):
     broken = failure_state.copy()
     broken[2] = math.nan
     assert np.array_equal(
-        updated_disturbance(airframe, before, failure_state, broken, controls_at, 0.0, INTERVAL_S), before
+        observe_interval(airframe, before, failure_state, broken, controls_at, 0.0, INTERVAL_S).disturbance, before
     )
     with pytest.raises(ValueError, match="duration"):
-        updated_disturbance(airframe, before, failure_state, failure_state, controls_at, 0.0, 0.0)
+        observe_interval(airframe, before, failure_state, failure_state, controls_at, 0.0, 0.0)
     with pytest.raises(ValueError, match="gain"):
         DisturbanceSettings(gain=0.0)
 

@@ -36,6 +36,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -43,7 +44,7 @@ from helireach_ros.core.airframe import Airframe
 from helireach_ros.core.planner import MAX_DISTURBANCE
 from helireach_ros.core.verification import segment_integrator, segment_parameters
 
-__all__ = ["DisturbanceSettings", "DisturbanceTracker", "predict_state", "updated_disturbance"]
+__all__ = ["DisturbanceSettings", "DisturbanceTracker", "IntervalEstimate", "observe_interval", "predict_state"]
 
 _PREDICTION_SEGMENTS = 5  # the flown control is sampled at 6 times over the interval, linear in between
 _PREDICTION_SAMPLES = 2
@@ -99,7 +100,14 @@ def predict_state(
     return current
 
 
-def updated_disturbance(
+class IntervalEstimate(NamedTuple):
+    """What one re-planning interval teaches: d̂ and the filtered state x̂ at its end (SI, 6)."""
+
+    disturbance: np.ndarray
+    state: np.ndarray
+
+
+def observe_interval(
     airframe: Airframe,
     estimate: np.ndarray,
     previous_state: np.ndarray,
@@ -108,56 +116,40 @@ def updated_disturbance(
     start_time: float,
     duration: float,
     settings: DisturbanceSettings | None = None,
-) -> np.ndarray:
-    """The estimate d̂ after one interval (see the module docstring).
+) -> IntervalEstimate:
+    """d̂ and x̂ after one interval (see the module docstring).
 
     Args:
         airframe: the planner's model.
         estimate: d̂ before the interval (3,).
-        previous_state: the measured state at ``start_time`` (6, SI).
+        previous_state: x̂ at ``start_time`` (6, SI; the measurement itself with a state gain of 1).
         measured_state: the measured state ``duration`` s later.
         controls_at: the controls flown, as a function of time.
         start_time: s.
         duration: s, > 0.
 
     Returns:
-        The new estimate; the old one where the prediction cannot be made (a non-finite state, an
-        integrator failure), so a bad interval never makes the estimate worse than it was.
+        The new estimates; where the prediction cannot be made (a non-finite state, an integrator failure) the
+        old d̂, so a bad interval never makes it worse than it was, and the measurement as x̂.
     """
-    return _observed(
-        airframe, estimate, previous_state, measured_state, controls_at, start_time, duration,
-        settings or DisturbanceSettings(),
-    )[0]  # fmt: skip
-
-
-def _observed(
-    airframe: Airframe,
-    estimate: np.ndarray,
-    previous_state: np.ndarray,
-    measured_state: np.ndarray,
-    controls_at: Callable[[float], np.ndarray],
-    start_time: float,
-    duration: float,
-    settings: DisturbanceSettings,
-) -> tuple[np.ndarray, np.ndarray]:
-    """(d̂, x̂) after one interval: ``previous_state`` is the previous x̂ (the previous measurement with α = 1)."""
+    settings = settings or DisturbanceSettings()
     estimate = np.asarray(estimate, dtype=float).reshape(3)
     if not (math.isfinite(duration) and duration > 0.0):
         raise ValueError(f"duration must be > 0, got {duration!r}")
     measured = np.asarray(measured_state, dtype=float)[:6]
     if not (np.all(np.isfinite(previous_state[:6])) and np.all(np.isfinite(measured))):
-        return estimate, measured.copy()
+        return IntervalEstimate(estimate, measured.copy())
     try:
         predicted = predict_state(
             airframe, previous_state, controls_at, start_time, duration, estimate, settings.relative_tolerance
         )
     except RuntimeError:
-        return estimate, measured.copy()
+        return IntervalEstimate(estimate, measured.copy())
     error = measured - predicted
     filtered = measured.copy()
     filtered[:_MEASURED] -= (1.0 - settings.state_gain) * error[:_MEASURED]  # x̂⁻ + α (z − x̂⁻); z exactly at α = 1
     learnt = np.clip(estimate + settings.gain * error[:3] / duration, -MAX_DISTURBANCE, MAX_DISTURBANCE)
-    return learnt, filtered
+    return IntervalEstimate(learnt, filtered)
 
 
 class DisturbanceTracker:
@@ -193,7 +185,7 @@ class DisturbanceTracker:
             self._previous = (time, measured)
         elif time > self._previous[0]:
             start, previous = self._previous
-            self.estimate, filtered = _observed(
+            self.estimate, filtered = observe_interval(
                 self.airframe, self.estimate, previous, measured, controls_at, start, time - start, self.settings
             )
             self._previous = (time, filtered)
