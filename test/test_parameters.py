@@ -11,11 +11,13 @@ import time
 
 import pytest
 import rclpy
+import yaml
 from rclpy.context import Context
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
+from helireach_ros.core.resources import config_path
 from helireach_ros.display.node import CockpitDisplay
 from helireach_ros.ros.node_command_line import node_name_of, parameter_specs
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
@@ -111,6 +113,28 @@ def test_every_numeric_parameter_of_every_node_has_a_range():
         for spec in specs:
             numeric = isinstance(spec.default, int | float) and not isinstance(spec.default, bool)
             assert not numeric or spec.value_range is not None, (node_name_of(node_class), spec.name)
+
+
+@pytest.mark.parametrize("node_class", NODE_CLASSES, ids=lambda node_class: node_class.__name__)
+def test_config_nodes_yaml_gives_every_declared_parameter_its_declared_default(node_class):
+    """The declarations are the one table (``--help`` reads them); config/nodes.yaml, which bringup loads first, must
+    not drift from it: every key a node's section sets is declared with that default, and every declared parameter is
+    set there, or named in a comment of its section (a list left to its default on purpose, e.g. the recorder's
+    topics), or shared in the ``/**`` section."""
+    text = config_path("nodes.yaml").read_text()
+    document = yaml.safe_load(text)
+    name = node_name_of(node_class)
+    section = document[f"/**/{name}"]["ros__parameters"]
+    section_text = text.split(f"/**/{name}:", 1)[1].split("\n/**", 1)[0]
+    specs = {spec.name: spec for spec in parameter_specs(node_class)}
+    for key, value in section.items():
+        assert key in specs, f"{name}: config/nodes.yaml sets {key!r}, which the node does not declare"
+        default = specs[key].default
+        same = value == default or (isinstance(value, float) and math.isnan(value) and math.isnan(default))
+        assert same, f"{name}.{key}: config/nodes.yaml {value!r}, declared default {default!r}"
+    shared = set(document["/**"]["ros__parameters"])
+    for key in specs:
+        assert key in section or key in shared or f"# {key}:" in section_text, f"{name}.{key} not in config/nodes.yaml"
 
 
 def test_a_numeric_declaration_without_a_range_is_a_programming_error(context):
