@@ -50,6 +50,7 @@ from helireach_ros.core.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState
 from helireach_ros.core.flight_phase import plan_cue_events
+from helireach_ros.core.plan_status import plan_values
 from helireach_ros.core.units import FT, KT
 from helireach_ros.display.node import CockpitDisplay
 from helireach_ros.display.pilot_units import axis_margins
@@ -444,7 +445,7 @@ def real_plan() -> Any:
 def plan_messages(plan: Any, start: TimeMsg) -> tuple[JointTrajectory, PathMsg, DiagnosticStatus]:
     """The trajectory, predicted path and plan status for ``plan`` as the planner node publishes them."""
     stamp_ns = rm.stamp_nanoseconds(start)
-    values = {**rm.plan_status_values(plan), "replan_index": 0, "failure_id": 1, "failure_stamp_ns": stamp_ns}
+    values = {**plan_values(plan), "replan_index": 0, "failure_id": 1, "failure_stamp_ns": stamp_ns}
     level = DiagnosticStatus.OK if plan.safe else DiagnosticStatus.ERROR
     return (
         rm.trajectory_message(plan, stamp_ns),

@@ -82,7 +82,6 @@ __all__ = [
     "odometry_message",
     "path_message",
     "pitch_quaternion",
-    "plan_status_values",
     "read_odometry",
     "read_rotor",
     "read_trajectory",
@@ -374,47 +373,6 @@ def path_message(
 
 
 # --- diagnostics --------------------------------------------------------------------------------------------
-def plan_status_values(plan: Any) -> dict[str, Any]:
-    """The ``/helireach/plan_status`` values that describe a converged plan itself (see msg_docs); the
-    planner node adds its bookkeeping (warm start, re-plan index, latency, failure and state)."""
-    touchdown = plan.replay.touchdown_state
-    return {
-        "status": plan.status,
-        "safe": plan.safe,
-        "verified": plan.verified,
-        "fallback": False,
-        "value": plan.value,
-        "time_to_land_s": plan.time_to_land,
-        "solve_time_ms": plan.solver.solve_time_ms,
-        "iterations": plan.solver.iterations,
-        "solver_status": plan.solver.status,
-        "predicted_touchdown_descent_rate_m_s": touchdown[0],
-        "predicted_touchdown_forward_speed_m_s": touchdown[1],
-        "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
-        "method": plan.method,
-        "reaction_delay_s": plan.reaction_delay_s,
-        "initial_thrust_coefficient": float(plan.initial_control[0]),
-        "initial_pitch_rad": float(plan.initial_control[1]),
-        "disturbance_descent_acceleration_m_s2": float(plan.disturbance[0]),
-        "disturbance_forward_acceleration_m_s2": float(plan.disturbance[1]),
-        "disturbance_rotor_acceleration_rad_s2": float(plan.disturbance[2]),
-        **flyability_values(plan.replay.flyability),
-    }
-
-
-def flyability_values(report: Any) -> dict[str, Any]:
-    """The ``/helireach/plan_status`` values of the replay's flyability check (see msg_docs): what the plan asks of
-    the aircraft (SI) and the limits it breaks ("" = none)."""
-    return {
-        "flyable": report.within_limits,
-        "flyability_violations": "; ".join(report.violations),
-        "max_pitch_rate_rad_s": report.max_pitch_rate,
-        "max_collective_rate_per_s": report.max_collective_rate,
-        "max_nose_up_pitch_rad": report.max_nose_up_pitch,
-        "touchdown_pitch_rad": math.nan if report.touchdown_pitch is None else report.touchdown_pitch,
-    }
-
-
 def diagnostic_status(
     level: bytes, name: str, message: str, hardware_id: str, values: Mapping[str, Any] | None = None
 ) -> DiagnosticStatus:

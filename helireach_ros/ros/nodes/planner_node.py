@@ -1,91 +1,10 @@
 """Planner node: on an engine failure, plan the landing, publish it, and keep re-planning down to the ground.
 
-**Where solves run.** With ``solver_workers`` ≥ 1 (default 2) every solve (live evaluations, the failure's plan,
-re-plans) runs in a :class:`~helireach_ros.core.solver_pool.SolverPool` of worker processes, each holding the NLP
-(no GIL shared with the executor). Failure plans and re-plans go at ``PRIORITY_FAILURE`` with a timeout of
-``solve_timeout`` (default: ``deadline``, at least 3 s). A worker that dies fails its job at once (within the
-pool's 10 ms supervision tick), one that hangs after ``solve_timeout``; the node then falls back exactly as after a
-failed solve (and the deadline's fallback goes out after ``deadline`` whatever the worker does), the pool restarts
-the worker, and ``/diagnostics`` reports the restarts and the last error. The timeout is not the deadline itself:
-a solve that is merely slow (a loaded machine) must still be allowed to replace the deadline's fallback, as
-without a pool; live jobs get 4 × ``solve_timeout`` (the cold check may solve twice). Start-up waits (at most
-60 s) for one ready worker. With ``solver_workers`` = 0 the node builds the NLP itself
-(:func:`~helireach_ros.core.planner.get_planner`) and solves one warm-up landing at start-up. Either way it loads
-the envelope (for warm starts and fallbacks) when it was computed for the same airframe, planner settings and
-total power loss.
-
-**Live reachability** (:mod:`helireach_ros.core.live_reachability`, ``live_rate`` Hz, 0 = off). Before any
-failure, at most one evaluation at a time: the latest valid state with a *measured* rotor speed
-(``current_state``, engine power = the rotor reading's measured torque × Ω if given, else 0), the engine assumed
-to fail now (``live_power_fraction`` of that power left), warm-started from the previous live solution (the
-first from the envelope's nearest stored plan), solved with the cold check (a warm plan that is not safe is
-solved again cold), replay-verified. Each verdict goes out on ``/helireach/live_reachability`` (latched
-``DiagnosticStatus``; OK only for a replay-verified safe plan). A state older than ``live_max_state_age`` is not
-evaluated; without a measured rotor speed nothing is evaluated (the answer would rest on an assumed Ω). Live
-evaluation pauses while a failure episode runs (a verdict still in flight is dropped) and while it is LANDED (the
-engine still out, on the ground), and starts afresh after ENDED or once the engine runs again.
-
-**The standby plan.** On the failure, if the latest live verdict is replay-verified safe and its state is at
-most ``standby_max_age`` older than the failure, its plan is published at once, before the refined solve is
-submitted: a normal plan publication stamped with the verdict's own state stamp, ``standby=true`` in the plan
-status, text ``STANDBY: …``. It counts as the episode's first plan (no deadline fallback after it; the lateness
-rule applies to it as to any first plan). The refined plan from the state at the failure follows as below and
-replaces it (``standby=false``); if that solve fails the standby stays (it is verified) and the closed loop keeps
-trying.
-
-One failure episode (:mod:`helireach_ros.core.failure_episode`, run by the monitor) is one planning episode:
-it starts on the failure event (``/helireach/failure_event``, or the monitor's ``/helireach/failure_episode``
-state when the event was missed) and stops when that state says ENDED (engine recovered: a plan status
-``ended`` goes out, re-planning stops, nothing is called safe for it again) or LANDED. The first plan is
-flagged ``late`` when its state is stamped more than ``max_message_age`` after the failure.
-
-On a failure event the node takes the latest canonical state
-(``/helireach/state`` + ``/helireach/rotor_state``), solves warm-started from the envelope's nearest
-stored plan, and publishes the trajectory (``/helireach/landing_trajectory``), the predicted path
-(``/helireach/landing_path``) and the plan status (``/helireach/plan_status``), all latched, stamped
-with the state's stamp. Only a plan whose NLP value is ≤ 0 *and* whose independent replay lands
-within limits is called safe.
-
-If no plan is out ``deadline`` seconds after the failure event (the solve is slow or failed), a
-fallback is published, flagged ``fallback=true``: the nearest envelope plan's controls from now on
-(its cell's status is reported), or without an envelope a standard autorotation entry (steady
-autorotation controls at the current speed). A later converged solve replaces it.
-
-While the descent lasts (down to ``replan_min_height``, while the current plan has more than
-``replan_min_remaining`` seconds to go) the node re-plans every ``replan_period`` seconds from the
-current state, warm-started from its previous plan (closed loop). A re-plan that fails keeps the
-current plan. Failure plans and re-plans run on the node's own solver thread, one at a time (a re-plan is
-skipped while a solve is still running); with a pool that thread only waits for the worker's answer.
-Callbacks only hand work to it (live jobs go to the pool directly, or to the solver thread without one). So
-whatever executor spins the node, even a single-threaded one, state reception, the deadline's fallback and
-status publishing go on during a solve.
-
-**Gross weight** (``estimate_weight``, off by default; :mod:`helireach_ros.core.weight_tracking`). Before a
-failure every rotor reading (Ω, engine power = torque × Ω) with a fresh state (speed, climb rate) is fed to a weight
-tracker: over a short window of steady flight, the weight whose trim power is the measured power, bounded by the
-uncertainty set's weight range (``config/uncertainty.yaml``) widened by ``weight_estimate_error``, quantised to
-``weight_estimate_step``. Live evaluations plan for it (that is where a solver builds a new weight's NLP); at the
-failure the episode's weight is fixed: the latest live evaluation's if a solver holds it, else the nearest one held
-(the file's at worst), and the pool sends the job to a worker that holds it: no NLP is built in the failure path
-(so with ``live_rate`` 0 the file's weight is used).
-Failure plans and re-plans use it. Every plan status names it (``planned_gross_weight_n``, ``gross_weight_source``,
-``gross_weight_reason``); without an estimate (engine power absent, flight not steady, implausible) the file's
-weight is used and the reason says why.
-
-**Model error** (``estimate_disturbance``, on by default; :mod:`helireach_ros.core.disturbance`). From the failure
-plan's state on, each re-plan compares the measured state with the model's prediction over the interval since the
-previous one (from that state, under the current plan's controls) and updates constant disturbance accelerations on
-ẏ, v̇, Ω̇ by ``disturbance_gain`` of the error; the re-plan (NLP and replay) is made for the model plus them, and
-its status reports them. The failure plan itself has none (nothing is known yet).
-
-**Robust verification** (``robust_verification``, off by default; :mod:`helireach_ros.core.background_verification`).
-Each safe failure plan (the refined one, solved from the state at the failure) is published at once, flagged
-``robust: pending``, and then flown through the uncertainty set's design (``robust_uncertainty``, '' =
-``config/uncertainty.yaml``): closed loop with this node's re-planning policy and each model's latency, stopping at the
-first model that fails, in one worker process at the lowest CPU priority. Its verdict (pending, then robust or not,
-with counts and the reason) goes out on ``/helireach/robust_verdict`` (latched), keyed by failure and state stamp.
-Off by default: on a 2-core machine the verification (~3–50 s of CPU per plan) takes the idle CPU the re-plans leave,
-and a standby plan, a fallback or a re-plan is not verified robustly.
+The node translates: ROS inputs to core calls, their answers to messages. The failure handling is
+:class:`~helireach_ros.core.landing_supervisor.LandingSupervisor`, the statuses are
+:mod:`helireach_ros.core.plan_status`, solves run in a :class:`~helireach_ros.core.solver_pool.SolverPool` (or on the
+node's solver thread), live verdicts come from :class:`~helireach_ros.core.live_reachability.LiveEvaluator`. What it
+does, parameter by parameter: docs/guides/planner-node.md.
 
 Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """
@@ -112,31 +31,30 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
-from helireach_ros.core.failure_episode import (
-    EpisodePhase,
-    EpisodeState,
-    FailureEpisode,
-    PlanLateness,
-    PublishedPlan,
-    episode_outcome,
-    episode_starts,
-    late_verdict,
-    plan_lateness,
-)
+from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
 from helireach_ros.core.fallback import FallbackPlan, fallback_plan
 from helireach_ros.core.landing_supervisor import (
-    CurrentPlan,
+    EpisodeAction,
+    LandingSupervisor,
     ReplanGate,
+    SupervisorSettings,
     TimerAction,
-    deadline_due,
-    fallback_after_failed_first_plan,
-    plan_time_remaining,
-    replan_gate,
-    replan_timer_action,
 )
 from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict, solve_with_cold_check
 from helireach_ros.core.model import clip_rotor_speed_noise
-from helireach_ros.core.plan_verdict import plan_verdict
+from helireach_ros.core.plan_status import (
+    PlannerHealth,
+    PlannerIdentity,
+    SolverPoolHealth,
+    StatusReport,
+    converged_plan_report,
+    episode_end_report,
+    fallback_report,
+    live_report,
+    no_plan_report,
+    planner_health_report,
+    robust_report,
+)
 from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 from helireach_ros.core.units import FT, KT
 from helireach_ros.core.vehicle_readings import (
@@ -163,7 +81,7 @@ from helireach_ros.ros.qos import QosWatch
 
 __all__ = ["LandingPlannerNode", "main"]
 
-_PLAN_HISTORY = 200  # published plans kept for inspection (demo, tests)
+_PLAN_HISTORY = 200  # robust verdicts kept for inspection (demo, tests)
 _ROTOR_NOISE_TOLERANCE = 0.01  # fraction of Ω₀ a measured rotor speed may lie outside its limits as noise
 _POOL_READY_TIMEOUT_S = 60.0  # start-up waits at most this long for one ready solver worker
 # The default solve_timeout: the deadline, but at least this. A kill is for a hung worker, not a slow one (a killed
@@ -284,14 +202,17 @@ class LandingPlannerNode(Node):
             else None
         )
 
-        self._lock = threading.Lock()  # latest state, failure bookkeeping
-        self._publish_lock = threading.Lock()  # one plan decision/publication at a time
+        self._lock = threading.Lock()  # latest state, weight tracker
+        self.supervisor = LandingSupervisor(
+            SupervisorSettings(
+                deadline=self._deadline,
+                replan_min_height=self._replan_min_height,
+                replan_min_remaining=self._replan_min_remaining,
+                max_message_age=self._max_message_age,
+            )
+        )
         self._odometry: tuple[OdometryReading, int, str] | None = None
         self._rotor: tuple[RotorReading, int] | None = None
-        self._failure: FailureEpisode | None = None
-        self._episode = EpisodeState()  # the monitor's failure-episode state (no_flag until one arrives)
-        self._failure_count = 0
-        self.published_plans: list[PublishedPlan] = []
         # Live evaluation: the evaluator and the job in flight, guarded by _live_lock. A generation number
         # drops verdicts that come back after a failure started or after a reset.
         self._live_lock = threading.Lock()
@@ -299,7 +220,6 @@ class LandingPlannerNode(Node):
         self._live_job: Future | None = None
         self._live_generation = 0
         self._live_frame = rm.DEFAULT_BODY_FRAME  # vehicle frame of the standby verdict's state
-        self.standby_plans: list[PublishedPlan] = []  # the published standby records (see is_standby)
         self._standby_messages: PlanMessages | None = None  # the standby's messages, built when its verdict came
 
         self.planner: Any | None = None  # the in-process LandingPlanner, or the SolverPool; None = not configured
@@ -518,12 +438,12 @@ class LandingPlannerNode(Node):
         if state_problems(StateLimits(), rotor=reading):
             return
         now_ns = self._now_ns()
+        # Steady flight before the failure only (after it the episode's weight is fixed); receive times, as every
+        # freshness check here (a replayed log's stamps are old).
+        before_failure = self.supervisor.before_failure
         with self._lock:
             self._rotor = (reading, now_ns)
-            odometry, failure = self._odometry, self._failure
-            # Steady flight before the failure only (after it the episode's weight is fixed); receive times, as
-            # every freshness check here (a replayed log's stamps are old).
-            before_failure = failure is None or bool(failure.outcome)
+            odometry = self._odometry
             if self._weights is not None and before_failure and odometry is not None:
                 if now_ns - odometry[1] <= self._state_timeout * 1e9:
                     state = odometry[0]
@@ -569,27 +489,17 @@ class LandingPlannerNode(Node):
         except ValueError as error:
             self.get_logger().warning(f"unreadable failure episode ignored: {error}", throttle_duration_sec=5.0)
             return
-        with self._lock:
-            self._episode = state
-            failure = self._failure
-        if state.started_ns is not None and episode_starts(
-            state, failure.event_stamp_ns if failure is not None else None
-        ):
+        action, failure = self.supervisor.observe_episode(state)
+        if action is EpisodeAction.START and state.started_ns is not None:
             self._start_failure(state.started_ns)
-            return
-        outcome = episode_outcome(state, failure.event_stamp_ns) if failure is not None else None
-        if failure is not None and outcome is not None:
-            self._stop_failure(failure, outcome, state)
+        elif action is EpisodeAction.STOP and failure is not None:
+            self._stop_failure(failure, state)
 
     def _start_failure(self, failure_stamp_ns: int) -> None:
         """Starts planning for the failure stamped ``failure_stamp_ns`` (once: its event and state both announce it)."""
-        now_ns = self._now_ns()
-        with self._lock:
-            if self._failure is not None and self._failure.event_stamp_ns == failure_stamp_ns:
-                return
-            self._failure_count += 1
-            failure = FailureEpisode(self._failure_count, failure_stamp_ns, now_ns)
-            self._failure = failure
+        failure = self.supervisor.start_failure(failure_stamp_ns, self._now_ns())
+        if failure is None:
+            return
         # The episode's weight, fixed now: the last live evaluation's (no bisection in the failure callback), one a
         # solver holds (never an NLP built in the failure path).
         if self.planner is not None:
@@ -615,35 +525,12 @@ class LandingPlannerNode(Node):
         self._submit(self._plan_initial, failure, queue=True)
         fast_logging.warning(self.get_logger(), f"engine failure #{failure.failure_id}: planning the landing")
 
-    def _stop_failure(self, failure: FailureEpisode, outcome: EpisodePhase, state: EpisodeState) -> None:
-        """Stops planning for ``failure``; the plan status says so (the last plan no longer applies), so a late
-        joiner's latched status is not the last plan of an episode that is over."""
-        with self._publish_lock:
-            if failure is not self._failure or not failure.stop(outcome):
-                return
-            status, reason, text = _EPISODE_END_STATUS[outcome]
-            values = {
-                "status": status,
-                "safe": False,
-                "verified": False,
-                "fallback": False,
-                "reason": reason,
-                "failure_id": failure.failure_id,
-                "failure_stamp_ns": failure.event_stamp_ns,
-                "ended_stamp_ns": state.ended_ns if state.ended_ns is not None else self._now_ns(),
-                "episode_id": state.episode_id,
-                "plans_published": len(failure.history),
-                "replans": failure.replans,
-            }
-            self._status_publisher.publish(
-                rm.diagnostic_status(
-                    DiagnosticStatus.WARN,
-                    f"{self.get_name()}: landing plan",
-                    text,
-                    self.airframe.name if self.planner is not None else "helireach",
-                    values,
-                )
-            )
+    def _stop_failure(self, failure: FailureEpisode, state: EpisodeState) -> None:
+        """Says that planning for ``failure`` stopped (the supervisor stopped it), so a late joiner's latched status
+        is not the last plan of an episode that is over."""
+        outcome = EpisodePhase(failure.outcome)
+        report = episode_end_report(failure, outcome, state, self._now_ns())
+        self._publish(self._status_publisher, "landing plan", report)
         self._pause_live()  # forget the verdicts from before and during the episode; evaluation resumes afresh
         fast_logging.warning(
             self.get_logger(),
@@ -664,17 +551,9 @@ class LandingPlannerNode(Node):
             self._live.reset()
             return None
 
-    def _live_paused(self) -> bool:
-        """A failure episode runs (the planner's own, or the monitor's), or it landed and the engine is still out:
-        on the ground with a failed engine "if the engine failed now" has no answer (and a drooping rotor made
-        every solve fail at full effort)."""
-        with self._lock:
-            failure, phase = self._failure, self._episode.phase
-        return (failure is not None and not failure.outcome) or phase in (EpisodePhase.FAILED, EpisodePhase.LANDED)
-
     def _on_live_timer(self) -> None:
         """Starts a live evaluation if one is due and none is in flight (see the module docstring)."""
-        if self._live is None or self.planner is None or self._live_paused():
+        if self._live is None or self.planner is None or self.supervisor.live_paused():
             return
         now_ns = self._now_ns()
         current = self.current_state(measured_power=True)
@@ -758,48 +637,20 @@ class LandingPlannerNode(Node):
                 standby = self._live.standby_verdict is verdict
                 if standby:
                     self._live_frame = frame  # the vehicle frame of the standby's state
-                self._live_publisher.publish(self._live_status(verdict, standby, weight))
+                report = live_report(
+                    verdict,
+                    standby=standby,
+                    weight=weight,
+                    configured_weight=self.airframe.gross_weight,
+                    power_fraction=self._live.settings.power_fraction,
+                    now_ns=self._now_ns(),
+                )
+                self._publish(self._live_publisher, "live reachability", report)
             if standby:  # its messages now, off the executor and outside the lock: the failure only publishes them
                 messages = plan_messages(verdict.plan, stamp_ns, frame, self._world_frame)
                 with self._live_lock:
                     if generation == self._live_generation:
                         self._standby_messages = messages
-
-    def _live_status(self, verdict: LiveVerdict, standby: bool, weight: WeightChoice) -> DiagnosticStatus:
-        """The ``/helireach/live_reachability`` message of a verdict (msg_docs/helireach_live_reachability.md)."""
-        assert self._live is not None  # verdicts come from the live evaluator
-        plan = verdict.plan
-        verified = plan is not None and plan.verified
-        values = {
-            "status": verdict.status,
-            "value": verdict.value,
-            "safe": verdict.safe,
-            "verified": verified,
-            "state_stamp_ns": verdict.state_stamp_ns,
-            "solve_time_ms": verdict.solve_time_ms,
-            "state_age_s": verdict.state_age_s(self._now_ns()),
-            "time_to_land_s": plan.time_to_land if plan is not None else math.nan,
-            "power_fraction": self._live.settings.power_fraction,
-            "reason": verdict.reason,
-            "standby": standby,
-            "descent_rate_m_s": verdict.state[0],
-            "forward_speed_m_s": verdict.state[1],
-            "rotor_speed_rad_s": verdict.state[2],
-            "height_m": verdict.state[3],
-            "distance_m": verdict.state[4],
-            "engine_power_w": verdict.state[5],
-            **self._weight_values(weight),
-        }
-        if plan is None:
-            level, text = DiagnosticStatus.ERROR, f"LIVE ERROR: no verdict ({verdict.reason})"
-        elif not plan.solver.success:  # plan_verdict would call it unsafe: it is unknown
-            level, text = DiagnosticStatus.ERROR, f"if the engine failed now: UNKNOWN (solver {plan.solver.status})"
-        else:
-            _, text = plan_verdict(plan, "measured")
-            level = DiagnosticStatus.OK if verdict.safe and verified else DiagnosticStatus.ERROR
-            text = f"if the engine failed now: {text}"
-        name = f"{self.get_name()}: live reachability"
-        return rm.diagnostic_status(level, name, text, self.airframe.name, values)
 
     # -- the solver thread ---------------------------------------------------------------------------------------
     def _submit(self, job: Callable[..., None], *args: Any, queue: bool = False) -> bool:
@@ -839,17 +690,17 @@ class LandingPlannerNode(Node):
 
     def is_standby(self, record: PublishedPlan) -> bool:
         """Whether a published plan is a standby plan (a live verdict's plan published on the failure)."""
-        return any(record is standby for standby in self.standby_plans)
+        return self.supervisor.is_standby(record)
 
-    def _standby_is_current(self, failure: FailureEpisode) -> bool:
-        return failure.current is not None and self.is_standby(failure.current)
+    @property
+    def published_plans(self) -> list[PublishedPlan]:
+        """The plans published (the latest ``_PLAN_HISTORY``), oldest first."""
+        return self.supervisor.published_plans
 
-    def _current_plan(self, failure: FailureEpisode) -> CurrentPlan:
-        if not failure.published or failure.current is None:
-            return CurrentPlan.NONE
-        if failure.current.fallback:
-            return CurrentPlan.FALLBACK
-        return CurrentPlan.STANDBY if self._standby_is_current(failure) else CurrentPlan.CONVERGED
+    @property
+    def standby_plans(self) -> list[PublishedPlan]:
+        """The standby plans published, oldest first."""
+        return self.supervisor.standby_plans
 
     def _plan_initial(self, failure: FailureEpisode, retry: bool = False) -> None:
         """The first plan of a failure, warm-started from the envelope's nearest stored plan.
@@ -869,12 +720,7 @@ class LandingPlannerNode(Node):
         if plan is None or not plan.solver.success:
             reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self.get_logger().error(f"failure #{failure.failure_id}: no converged plan ({reason})")
-            if fallback_after_failed_first_plan(
-                retry=retry,
-                any_published=failure.published,
-                has_plan_from_state=failure.has_plan_from(stamp_ns),
-                standby_current=self._standby_is_current(failure),
-            ):
+            if self.supervisor.fallback_after_failed_solve(failure, retry=retry, stamp_ns=stamp_ns):
                 self._publish_fallback(failure, state, stamp_ns, reason)
             return
         robust = self._robust is not None and plan.safe
@@ -921,17 +767,9 @@ class LandingPlannerNode(Node):
 
     def _on_deadline(self) -> None:
         self._publish_robust_verdicts()
-        with self._lock:
-            failure = self._failure
-            if failure is None or not deadline_due(
-                failure_active=failure.active,
-                any_published=failure.published,
-                already_handled=failure.deadline_handled,
-                elapsed_s=(self._now_ns() - failure.event_received_ns) * 1e-9,
-                deadline_s=self._deadline,
-            ):
-                return
-            failure.deadline_handled = True
+        failure = self.supervisor.deadline_fallback_due(self._now_ns())
+        if failure is None:
+            return
         current = self.current_state()
         if current is None:
             self._publish_status_only(failure, f"no plan within {self._deadline:g} s and no valid state")
@@ -940,13 +778,7 @@ class LandingPlannerNode(Node):
         self._publish_fallback(failure, state, stamp_ns, f"no plan within the {self._deadline:g} s deadline")
 
     def _on_replan_timer(self) -> None:
-        with self._lock:
-            failure = self._failure
-        if failure is None:
-            return
-        action = replan_timer_action(
-            failure_active=failure.active, planner_ready=self.planner is not None, current=self._current_plan(failure)
-        )
+        action, failure = self.supervisor.timer_action(planner_ready=self.planner is not None)
         if action is TimerAction.RETRY_FIRST_PLAN:
             self._submit(self._plan_initial, failure, True)
         elif action is TimerAction.REPLAN:
@@ -954,38 +786,29 @@ class LandingPlannerNode(Node):
 
     def _replan(self, failure: FailureEpisode) -> None:
         """One closed-loop re-plan from the current state, warm-started from the current plan."""
-        if not failure.active or failure is not self._failure:
-            return
         current = self.current_state()
         if current is None:
             return
         state, stamp_ns, frame, rotor_source = current
-        previous = failure.current
-        if previous is None:  # the timer re-plans only once a converged plan is out
-            return
-        remaining = plan_time_remaining(previous.plan.time_to_land, (stamp_ns - previous.stamp_ns) * 1e-9)
-        gate = replan_gate(
-            rotor_measured=rotor_source == "measured",
-            height=state[3],
-            time_remaining=remaining,
-            min_height=self._replan_min_height,
-            min_remaining=self._replan_min_remaining,
+        decision = self.supervisor.replan_decision(
+            failure, rotor_measured=rotor_source == "measured", height=state[3], stamp_ns=stamp_ns
         )
-        if gate is ReplanGate.PAUSE_NO_ROTOR:
-            failure.replans_skipped_no_rotor += 1
+        if decision is None or decision.previous is None:
+            return
+        if decision.gate is ReplanGate.PAUSE_NO_ROTOR:
             self.get_logger().warning(
                 f"failure #{failure.failure_id}: re-planning paused: no measured rotor speed (the current plan is "
                 f"kept; {failure.replans_skipped_no_rotor} re-plans skipped)",
                 throttle_duration_sec=1.0,
             )
             return
-        if gate is ReplanGate.END_CLOSED_LOOP:
-            failure.active = False
+        if decision.gate is ReplanGate.END_CLOSED_LOOP:
             self.get_logger().info(
-                f"failure #{failure.failure_id}: closed loop ends at {state[3]:.2f} m, {remaining:.2f} s to go "
-                f"({failure.replans} re-plans, {failure.replans_failed} failed)"
+                f"failure #{failure.failure_id}: closed loop ends at {state[3]:.2f} m, {decision.remaining:.2f} s to "
+                f"go ({failure.replans} re-plans, {failure.replans_failed} failed)"
             )
             return
+        previous = decision.previous
         # from the control being flown at the state's stamp (the flyable controls stay continuous), no delay
         flying = previous.plan.controls_at([(stamp_ns - previous.stamp_ns) * 1e-9])[:, 0]
         # what the last interval taught of the model's error (the current plan's controls were flown in it)
@@ -993,12 +816,12 @@ class LandingPlannerNode(Node):
         tracker = failure.disturbance
         disturbance = tracker.update(stamp_ns * 1e-9, state, flown) if tracker is not None else None
         plan, error = self._solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
-        if plan is None or not plan.solver.success:
-            failure.replans_failed += 1
+        converged = plan is not None and plan.solver.success
+        self.supervisor.replan_solved(failure, converged=converged)
+        if not converged:
             reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self.get_logger().warning(f"re-plan failed ({reason}); keeping the current plan", throttle_duration_sec=1.0)
             return
-        failure.replans += 1
         self._publish_plan(failure, plan, stamp_ns, frame, "previous_plan", rotor_source, replan=True)
 
     # -- fallbacks -----------------------------------------------------------------------------------------------
@@ -1012,98 +835,48 @@ class LandingPlannerNode(Node):
         except Exception as error:  # the last resort must not take the node down
             self._publish_status_only(failure, f"{reason}; no fallback available ({error})")
             return
-        with self._publish_lock:
-            if failure is not self._failure or failure.outcome:
-                return  # a newer failure came, or this one is over
-            if failure.current is not None and not failure.current.fallback:
-                return  # a converged plan came first
+        with self.supervisor.publication(failure, fallback=True) as allowed:
+            if not allowed:
+                return  # a newer failure came, this one is over, or a converged plan came first
             now_ns = self._now_ns()
-            lateness = plan_lateness(failure.event_stamp_ns, stamp_ns, self._max_message_age)
             record = PublishedPlan(
-                failure.failure_id,
-                failure.replans,
-                stamp_ns,
-                fallback,
-                True,
-                (now_ns - failure.event_received_ns) * 1e-6,
-                now_ns,
-                "none",
-            )
+                failure.failure_id, failure.replans, stamp_ns, fallback, True,
+                (now_ns - failure.event_received_ns) * 1e-6, now_ns, "none",
+            )  # fmt: skip
             self._trajectory_publisher.publish(rm.trajectory_message(fallback, stamp_ns))
-            values = {
-                "status": "fallback",
-                "safe": False,
-                "verified": False,
-                "fallback": True,
-                "standby": False,
-                "fallback_kind": fallback.kind,
-                "fallback_source_status": fallback.source_status,
-                "reason": reason,
-                "time_to_land_s": fallback.time_to_land,
-                "latency_ms": record.latency_ms,
-                **self._lateness_values(lateness),
-                **self._common_values(failure, state, stamp_ns),
-            }
-            _, text = late_verdict("WARN", f"FALLBACK (not verified): {fallback.description}; {reason}", lateness)
-            name = f"{self.get_name()}: landing plan"
-            self._status_publisher.publish(
-                rm.diagnostic_status(DiagnosticStatus.WARN, name, text, self.airframe.name, values)
+            report = fallback_report(
+                fallback,
+                identity=self._identity(),
+                failure=failure,
+                state=state,
+                stamp_ns=stamp_ns,
+                reason=reason,
+                lateness=self.supervisor.lateness(failure, stamp_ns, replan=False),
+                latency_ms=record.latency_ms,
             )
-            self._remember(failure, record)
+            self._publish(self._status_publisher, "landing plan", report)
+            self.supervisor.remember(failure, record)
         self.get_logger().warning(f"failure #{failure.failure_id}: published fallback {fallback.description}")
 
     # -- publishing ----------------------------------------------------------------------------------------------
-    @staticmethod
-    def _lateness_values(lateness: PlanLateness | None) -> dict[str, Any]:
-        """``late``, ``late_by_s``, ``state_delay_s``, ``after_fallback`` (re-plans: not late, no delay)."""
-        if lateness is None:
-            return {"late": False, "late_by_s": 0.0, "after_fallback": False}
-        return {
-            "late": lateness.late,
-            "late_by_s": lateness.late_by_s,
-            "state_delay_s": lateness.state_delay_s,
-            "after_fallback": lateness.after_fallback,
-        }
-
     @property
     def episode_weight(self) -> WeightChoice:
         """The gross weight the current (or last) failure episode plans for (the file's before any failure)."""
         weight = self._failure_weight
         return weight if weight is not None else WeightChoice(self.airframe.gross_weight, "file", 0.0, "no failure")
 
-    def _weight_values(self, weight: WeightChoice) -> dict[str, Any]:
-        """The status keys of the weight a plan was made for (msg_docs/helireach_plan_status.md); ``gross_weight_n``
-        stays the configured aircraft's (the recorder's run metadata adopts it)."""
-        return {
-            "gross_weight_n": self.airframe.gross_weight,
-            "planned_gross_weight_n": weight.gross_weight,
-            "gross_weight_source": weight.source,
-            "gross_weight_change": weight.relative_change,
-            "gross_weight_estimate_change": weight.estimated_change,
-            "gross_weight_reason": weight.reason,
-        }
+    def _identity(self) -> PlannerIdentity:
+        envelope_id = self.envelope.envelope_id if self.envelope is not None else ""
+        return PlannerIdentity(
+            self.airframe.name, self.airframe.gross_weight, self.airframe.density_altitude, envelope_id
+        )
 
-    def _common_values(
-        self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, weight: WeightChoice | None = None
-    ) -> dict[str, Any]:
-        """Keys of every plan status; ``weight`` None: a fallback (the file's model)."""
-        if weight is None:
-            weight = WeightChoice(self.airframe.gross_weight, "file", 0.0, "fallback controls from the file's model")
-        return {
-            "failure_id": failure.failure_id,
-            "failure_stamp_ns": failure.event_stamp_ns,
-            "state_stamp_ns": stamp_ns,
-            "initial_descent_rate_m_s": state[0],
-            "initial_forward_speed_m_s": state[1],
-            "initial_rotor_speed_rad_s": state[2],
-            "initial_height_m": state[3],
-            "initial_distance_m": state[4],
-            "initial_engine_power_w": state[5],
-            "airframe": self.airframe.name,
-            **self._weight_values(weight),
-            "density_altitude_m": self.airframe.density_altitude,
-            "envelope_id": self.envelope.envelope_id if self.envelope is not None else "",
-        }
+    def _publish(self, publisher: Any, what: str, report: StatusReport) -> None:
+        """Publishes a status report as ``<node>: <what>``."""
+        hardware_id = self.airframe.name if self.planner is not None else "helireach"
+        level = rm.DIAGNOSTIC_LEVELS[report.level]
+        name = f"{self.get_name()}: {what}"
+        publisher.publish(rm.diagnostic_status(level, name, report.text, hardware_id, report.values))
 
     def _publish_plan(
         self,
@@ -1127,60 +900,39 @@ class LandingPlannerNode(Node):
         """
         live_weight = self._live_weight or WeightChoice(self.airframe.gross_weight, "file", 0.0, "")
         weight = live_weight if standby else self.episode_weight
-        with self._publish_lock:
-            if failure is not self._failure or failure.outcome:
+        with self.supervisor.publication(failure, fallback=False) as allowed:
+            if not allowed:
                 return  # a newer failure superseded this one, or it ended, while solving
             now_ns = self._now_ns()
-            # Late "after a fallback" only if a fallback went out first: a standby before it is a verified plan.
-            after_fallback = any(record.fallback for record in failure.history)
-            lateness = (
-                None
-                if replan
-                else plan_lateness(failure.event_stamp_ns, stamp_ns, self._max_message_age, after_fallback)
-            )
             reference_ns = failure.event_received_ns if not replan else stamp_ns
             record = PublishedPlan(
-                failure.failure_id,
-                failure.replans,
-                stamp_ns,
-                plan,
-                False,
-                (now_ns - reference_ns) * 1e-6,
-                now_ns,
+                failure.failure_id, failure.replans, stamp_ns, plan, False, (now_ns - reference_ns) * 1e-6, now_ns,
                 warm_source,
-            )
+            )  # fmt: skip
             if messages is None or not messages.matches(plan, stamp_ns, frame, self._world_frame):
                 messages = plan_messages(plan, stamp_ns, frame, self._world_frame)
             self._trajectory_publisher.publish(messages.trajectory_cdr)
             self._path_publisher.publish(messages.path_cdr)
-            values = {
-                **rm.plan_status_values(plan),
-                "standby": standby,
-                "warm_start": warm_source,
-                "replan_index": failure.replans if replan else 0,
-                **self._lateness_values(lateness),
-                "latency_ms": record.latency_ms,
-                "rotor_speed_source": rotor_source,
-                **self._common_values(failure, plan.initial_state, stamp_ns, weight),
-            }
-            if robust_pending and self._robust is not None:
-                values.update(robust="pending", robust_design=self._robust.design)
-            level_name, text = plan_verdict(plan, rotor_source)
-            if standby:
-                state_age_s = (failure.event_stamp_ns - stamp_ns) * 1e-9
-                text = f"STANDBY (live plan from {state_age_s:.2f} s before the failure; refining): {text}"
-            if lateness is not None:
-                level_name, text = late_verdict(level_name, text, lateness)
-            level = rm.DIAGNOSTIC_LEVELS[level_name]
-            self._status_publisher.publish(
-                rm.diagnostic_status(level, f"{self.get_name()}: landing plan", text, self.airframe.name, values)
+            report = converged_plan_report(
+                plan,
+                identity=self._identity(),
+                failure=failure,
+                stamp_ns=stamp_ns,
+                warm_source=warm_source,
+                rotor_source=rotor_source,
+                replan_index=failure.replans if replan else 0,
+                lateness=self.supervisor.lateness(failure, stamp_ns, replan=replan),
+                latency_ms=record.latency_ms,
+                weight=weight,
+                standby=standby,
+                robust_design=self._robust.design if robust_pending and self._robust is not None else None,
             )
-            self._remember(failure, record)
-            if standby:
-                self.standby_plans.append(record)
-                del self.standby_plans[:-_PLAN_HISTORY]
+            self._publish(self._status_publisher, "landing plan", report)
+            self.supervisor.remember(failure, record, standby=standby)
         if not replan:
-            fast_logging.info(self.get_logger(), f"failure #{failure.failure_id}: {text} ({record.latency_ms:.0f} ms)")
+            fast_logging.info(
+                self.get_logger(), f"failure #{failure.failure_id}: {report.text} ({record.latency_ms:.0f} ms)"
+            )
 
     def _submit_robust(self, failure: FailureEpisode, plan: Any, stamp_ns: int) -> None:
         """Queues the plan's robust verification and publishes its verdict as pending."""
@@ -1202,66 +954,24 @@ class LandingPlannerNode(Node):
 
     def _publish_robust(self, key: tuple[int, int, int], summary: Any | None) -> None:
         """The robust verdict of a failure plan (a RobustSummary), or None: pending."""
-        failure_id, failure_stamp_ns, stamp_ns = key
-        values: dict[str, Any] = {
-            "failure_id": failure_id, "failure_stamp_ns": failure_stamp_ns, "state_stamp_ns": stamp_ns,
-        }  # fmt: skip
-        if summary is None:
-            design = self._robust.design if self._robust is not None else ""
-            level, text = DiagnosticStatus.STALE, f"PENDING: robust verification running ({design})"
-            values.update(robust="pending", robust_design=design)
-        else:
-            values.update(summary.values())
-            if summary.robust:
-                level = DiagnosticStatus.OK
-                text = f"ROBUST: lands closed loop in all {summary.models_flown} models ({summary.design})"
-            else:
-                level = DiagnosticStatus.ERROR if summary.error else DiagnosticStatus.WARN
-                text = f"NOT ROBUST: {summary.reason}"
-        self._robust_publisher.publish(
-            rm.diagnostic_status(level, f"{self.get_name()}: robust verdict", text, self.airframe.name, values)
-        )
+        design = self._robust.design if self._robust is not None else ""
+        self._publish(self._robust_publisher, "robust verdict", robust_report(key, summary, design))
         self.robust_verdicts.append((key, summary))
         del self.robust_verdicts[:-_PLAN_HISTORY]
 
     def _publish_status_only(self, failure: FailureEpisode, text: str) -> None:
         self.get_logger().error(f"failure #{failure.failure_id}: {text}")
-        hardware_id = self.airframe.name if self.planner is not None else "helireach"
-        values = {
-            "status": "none",
-            "safe": False,
-            "verified": False,
-            "fallback": False,
-            "reason": text,
-            "failure_id": failure.failure_id,
-        }
-        with self._publish_lock:
-            if failure is self._failure and not failure.published and not failure.outcome:
-                self._status_publisher.publish(
-                    rm.diagnostic_status(
-                        DiagnosticStatus.ERROR,
-                        f"{self.get_name()}: landing plan",
-                        f"NO PLAN: {text}",
-                        hardware_id,
-                        values,
-                    )
-                )
-
-    def _remember(self, failure: FailureEpisode, record: PublishedPlan) -> None:
-        failure.remember(record)
-        self.published_plans.append(record)
-        del self.published_plans[:-_PLAN_HISTORY]
+        with self.supervisor.publication(failure, fallback=False) as allowed:
+            if allowed and self.supervisor.no_plan_may_be_reported(failure):
+                self._publish(self._status_publisher, "landing plan", no_plan_report(failure, text))
 
     # -- diagnostics ---------------------------------------------------------------------------------------------
     @property
     def failure_active(self) -> bool:
         """A failure is being handled and the closed loop has not ended."""
-        with self._lock:
-            return self._failure is not None and self._failure.active
+        return self.supervisor.failure_active
 
     def _publish_diagnostics(self) -> None:
-        with self._lock:
-            failure = self._failure
         if self.planner is None:
             status = rm.diagnostic_status(
                 DiagnosticStatus.ERROR,
@@ -1271,88 +981,37 @@ class LandingPlannerNode(Node):
             )
             self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
             return
-        values: dict[str, Any] = {
-            "airframe": self.airframe.name,
-            "method": self.settings.method,
-            "startup_s": self.startup_s,
-            "warm_up_ms": self.warm_up_ms,
-            "envelope": self._envelope_note,
-            "failures": self._failure_count,
-            "solving": self.solving,
-            "failure_episode": self._episode.phase.value,
-            "solver_workers": self._pool.pool_settings.workers if self._pool is not None else 0,
-            "solve_timeout_s": self._solve_timeout,
-            "ready_weights": len(self.ready_weights()),
-        }
-        weight_now = self._weight_now()
-        values |= {
-            "weight_estimate_n": weight_now.gross_weight,
-            "weight_estimate_source": weight_now.source,
-            "weight_estimate_change": weight_now.relative_change,
-            "weight_estimate_reason": weight_now.reason,
-        }
-        problems = [f"implausible airframe: {problem}" for problem in self._airframe_problems]
-        no_worker = False
-        if self._pool is not None:
-            ready = self._pool.ready_workers
-            values.update(
-                ready_workers=ready,
-                busy_workers=self._pool.busy_workers,
-                worker_restarts=self._pool.restarts,
-                last_worker_error=self._pool.last_error,
-            )
-            if ready == 0:
-                no_worker = True
-                problems.append("no solver worker ready (failures get fallbacks)")
-            if self._pool.restarts:
-                problems.append(f"{self._pool.restarts} solver worker restarts (last: {self._pool.last_error})")
-        with self._live_lock:
-            live = self._live
-            if live is not None:
-                latest = live.latest
-                values.update(
-                    live_rate_hz=live.settings.rate_hz,
-                    live_evaluations=live.evaluations,
-                    live_errors=live.errors,
-                    live_clock_jumps_back=live.clock_jumps_back,
-                    live_status=latest.status if latest is not None else "none",
-                    standby_available=live.standby_verdict is not None,
-                )
-            else:
-                values["live_rate_hz"] = 0.0
-        if failure is not None:
-            values.update(
-                failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed,
-                replans_skipped_no_rotor=failure.replans_skipped_no_rotor,
-            )  # fmt: skip
-            current = self.current_state() if failure.active and failure.replans_skipped_no_rotor else None
-            if current is not None and current[3] != "measured":
-                problems.append("re-planning paused: no measured rotor speed (the current plan is kept)")
-            values["failure_outcome"] = failure.outcome
-            if failure.current is not None:
-                values["last_latency_ms"] = failure.current.latency_ms
-        level = DiagnosticStatus.OK if self.envelope is not None and not problems else DiagnosticStatus.WARN
-        level = DiagnosticStatus.ERROR if no_worker else level
-        text = "; ".join(
-            ["ready" if self.envelope is not None else "ready without an envelope (cold starts)", *problems]
+        pool = self._pool
+        failure = self.supervisor.failure
+        current = self.current_state() if failure is not None and failure.active else None
+        health = PlannerHealth(
+            airframe=self.airframe.name,
+            method=self.settings.method,
+            startup_s=self.startup_s,
+            warm_up_ms=self.warm_up_ms,
+            envelope_note=self._envelope_note,
+            has_envelope=self.envelope is not None,
+            failures=self.supervisor.failure_count,
+            solving=self.solving,
+            episode_phase=self.supervisor.episode.phase.value,
+            solve_timeout_s=self._solve_timeout,
+            ready_weights=len(self.ready_weights()),
+            weight_now=self._weight_now(),
+            airframe_problems=tuple(self._airframe_problems),
+            pool=None
+            if pool is None
+            else SolverPoolHealth(
+                pool.pool_settings.workers, pool.ready_workers, pool.busy_workers, pool.restarts, pool.last_error
+            ),
+            rotor_measured=None if current is None else current[3] == "measured",
         )
-        status = rm.diagnostic_status(level, f"{self.get_name()}: planner", text, self.airframe.name, values)
+        with self._live_lock:
+            report = planner_health_report(health, self._live, failure)
+        status = rm.diagnostic_status(
+            rm.DIAGNOSTIC_LEVELS[report.level], f"{self.get_name()}: planner", report.text, self.airframe.name,
+            report.values,
+        )  # fmt: skip
         self._diagnostics_publisher.publish(rm.diagnostic_array(self._now_ns(), status))
-
-
-_EPISODE_END_STATUS = {
-    EpisodePhase.ENDED: (
-        "ended",
-        "engine recovered: the failure flag stayed false for the recovery hold",
-        "ENDED (engine recovered): no landing plan; the last trajectory no longer applies",
-    ),
-    EpisodePhase.LANDED: (
-        "landed",
-        "on the ground: the monitor saw the aircraft landed",
-        "LANDED: planning stopped; the last trajectory no longer applies",
-    ),
-}
-"""Plan status, reason and message once an episode is over, per outcome."""
 
 
 def _controls_from_stamp(plan: Any, stamp_ns: int) -> Callable[[float], np.ndarray]:
