@@ -6,6 +6,7 @@ Each rclpy test has its own ``Context`` (discovery OFF). The command-line side (
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -25,10 +26,12 @@ from helireach_ros.ros.nodes.monitor import VehicleMonitor
 from helireach_ros.ros.nodes.planner_node import LandingPlannerNode
 from helireach_ros.ros.nodes.recorder import McapRecorder
 from helireach_ros.ros.nodes.sim_vehicle import SimVehicleNode
+from helireach_ros.ros.parameter_table import parameter, table_specs
 from helireach_ros.ros.parameters import (
     ParameterError,
     checked_override,
     declare_checked_parameter,
+    declare_parameters,
     shared_parameter_names,
     unknown_parameter_messages,
     warn_unknown_parameters,
@@ -216,3 +219,32 @@ def test_a_composed_system_warns_once_and_only_for_names_no_node_declares(contex
     finally:
         monitor.destroy_node()
         other.destroy_node()
+
+
+def test_a_parameter_table_declares_its_fields_in_order_and_refuses_other_fields(context):
+    @dataclasses.dataclass(frozen=True)
+    class Table:
+        period: float = parameter(0.5, "period, s", (0.01, 10.0))
+        frames: list = parameter(["odom"], "frames")
+        name: str = parameter("x", "a name")
+
+    assert [spec.name for spec in table_specs(Table)] == ["period", "frames", "name"]
+    node = Node("table_node", context=context, parameter_overrides=[Parameter("period", value=2)])
+    try:
+        values = declare_parameters(node, Table)
+        assert values == Table(period=2.0, frames=["odom"], name="x") and isinstance(values.period, float)
+        assert values.frames is not Table().frames  # a list default is a fresh copy per table
+        with pytest.raises(ParameterError, match="period"):
+            declare_parameters(Node("table_node_2", context=context, parameter_overrides=[
+                Parameter("period", value=20.0)]), Table)  # fmt: skip
+    finally:
+        node.destroy_node()
+
+    @dataclasses.dataclass(frozen=True)
+    class Loose:
+        period: float = 0.5  # not a parameter() field: no description, no range
+
+    with pytest.raises(TypeError, match=r"Loose\.period"):
+        table_specs(Loose)
+    with pytest.raises(TypeError, match="not a parameter table"):
+        table_specs(dict)

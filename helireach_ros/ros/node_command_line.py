@@ -27,6 +27,7 @@ from typing import Any
 import yaml
 
 from helireach_ros import __version__
+from helireach_ros.ros.parameter_table import ParameterSpec, table_specs
 
 __all__ = [
     "HELP_FLAGS",
@@ -135,17 +136,6 @@ def check_node_arguments(args: Sequence[str]) -> None:
     check_ros_arguments(ros)
 
 
-@dataclass(frozen=True)
-class ParameterSpec:
-    """One declared parameter as the help text shows it (values as Python objects, or source text)."""
-
-    name: str
-    default: Any
-    description: str
-    value_range: Any = None
-    read_only: bool = True
-
-
 def _type_label(default: Any) -> str:
     if isinstance(default, bool):
         return "bool"
@@ -221,6 +211,8 @@ def _specs_in(function: Any) -> list[ParameterSpec]:
             given = dict(zip(fields, arguments, strict=False)) | {k: v for k, v in keywords.items() if k in fields}
             values = {key: evaluate(expression) for key, expression in given.items()}
             specs.append(ParameterSpec(**values))
+        elif name == "declare_parameters" and len(arguments) == 2:  # a parameter table: its fields
+            specs += table_specs(evaluate(arguments[1]))
         elif name.startswith("declare_") and callable(namespace.get(name)):  # e.g. declare_aircraft(self)
             specs += _specs_in(namespace[name])
     return specs

@@ -27,7 +27,7 @@ import math
 import weakref
 from collections.abc import Callable, Collection, Iterable, Sequence
 from functools import lru_cache, partial
-from typing import Any
+from typing import Any, TypeVar
 
 import yaml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -36,6 +36,8 @@ from rclpy.parameter import Parameter
 
 from helireach_ros.core.resources import config_path
 
+_Table = TypeVar("_Table")
+
 __all__ = [
     "ROS_OWN_PARAMETERS",
     "ROS_OWN_PARAMETER_PREFIXES",
@@ -43,6 +45,7 @@ __all__ = [
     "checked_override",
     "declare_aircraft",
     "declare_checked_parameter",
+    "declare_parameters",
     "shared_parameter_names",
     "unknown_parameter_messages",
     "warn_unknown_parameters",
@@ -185,6 +188,24 @@ def declare_checked_parameter(
         _INT_TO_FLOAT_NODES.add(node)
         node.add_pre_set_parameters_callback(partial(_convert_ints_for_floats, node))
     return node.declare_parameter(name, value, descriptor, ignore_override=True).value
+
+
+def declare_parameters(node: Node, table: type[_Table]) -> _Table:
+    """Declares every parameter of a table (:mod:`helireach_ros.ros.parameter_table`) in field order with
+    :func:`declare_checked_parameter`, and returns the table filled with the values.
+
+    Raises:
+        ParameterError: an override of the wrong type or out of range (the node must not start).
+    """
+    from helireach_ros.ros.parameter_table import table_specs
+
+    values = {
+        spec.name: declare_checked_parameter(
+            node, spec.name, spec.default, spec.description, spec.value_range, read_only=spec.read_only
+        )
+        for spec in table_specs(table)
+    }
+    return table(**values)
 
 
 @lru_cache(maxsize=1)
