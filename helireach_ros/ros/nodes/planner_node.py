@@ -14,10 +14,8 @@ from __future__ import annotations
 import contextlib
 import math
 import threading
-import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
-from concurrent.futures import TimeoutError as FutureTimeoutError
 from functools import partial
 from typing import Any
 
@@ -32,7 +30,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
-from helireach_ros.core.fallback import FallbackPlan, fallback_plan
+from helireach_ros.core.fallback import FallbackPlan
 from helireach_ros.core.landing_supervisor import (
     EpisodeAction,
     LandingSupervisor,
@@ -40,7 +38,7 @@ from helireach_ros.core.landing_supervisor import (
     SupervisorSettings,
     TimerAction,
 )
-from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict, solve_with_cold_check
+from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
 from helireach_ros.core.model import clip_rotor_speed_noise
 from helireach_ros.core.plan_status import (
     PlannerHealth,
@@ -55,8 +53,7 @@ from helireach_ros.core.plan_status import (
     planner_health_report,
     robust_report,
 )
-from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
-from helireach_ros.core.units import FT, KT
+from helireach_ros.core.planner_backend import BackendSettings, PlannerBackend
 from helireach_ros.core.vehicle_readings import (
     OdometryReading,
     RotorReading,
@@ -64,18 +61,12 @@ from helireach_ros.core.vehicle_readings import (
     helicopter_state,
     state_problems,
 )
-from helireach_ros.core.weight_tracking import (
-    WeightChoice,
-    WeightSample,
-    WeightTracker,
-    WeightTrackingSettings,
-    plausible_band,
-    ready_choice,
-)
+from helireach_ros.core.weight_tracking import WeightChoice, WeightSample, ready_choice
 from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.nodes.planner_parameters import PlannerParameters
+from helireach_ros.ros.parameters import declare_aircraft, declare_parameters
 from helireach_ros.ros.plan_messages import PlanMessages, plan_messages
 from helireach_ros.ros.qos import QosWatch
 
@@ -83,132 +74,46 @@ __all__ = ["LandingPlannerNode", "main"]
 
 _PLAN_HISTORY = 200  # robust verdicts kept for inspection (demo, tests)
 _ROTOR_NOISE_TOLERANCE = 0.01  # fraction of Ω₀ a measured rotor speed may lie outside its limits as noise
-_POOL_READY_TIMEOUT_S = 60.0  # start-up waits at most this long for one ready solver worker
 # The default solve_timeout: the deadline, but at least this. A kill is for a hung worker, not a slow one (a killed
 # worker is out for seconds while it rebuilds its NLPs): an unsafe failure plan for an estimated weight (plain CasADi
 # functions, 300 iterations) measured 1.05 s on an idle 2-core machine, over 1 s wherever the machine is loaded.
 _MIN_SOLVE_TIMEOUT_S = 3.0
 _NO_REPLANNING_PERIOD_S = 1e9  # replan_period 0 (re-planning off): the closed loop of the robust check flies one plan
-_QUEUE_WAIT_S = 5.0  # a failure job no worker took within solve_timeout + this is withdrawn (all workers down)
-_LIVE_TIMEOUT_FACTOR = 4.0  # live job timeout = this × solve_timeout (the cold check may solve twice)
 
 
 class LandingPlannerNode(Node):
     """Plans landings after engine failures and re-plans during the descent.
 
-    Parameters: ``airframe``, ``gross_weight`` (N, 0 = the airframe file's), ``density_altitude`` (m, NaN = the
-    file's), ``planner_settings`` (file, '' = config/planner.yaml), ``envelope_file``
-    ('' = the shipped one, ``none`` = no envelope), ``deadline`` (s), ``replan_period`` (s, 0 = off),
-    ``replan_min_height`` (m), ``replan_min_remaining`` (s), ``state_timeout`` (s), ``max_message_age`` (s),
-    ``assume_total_power_loss``, ``warm_up``, ``world_frame``, ``rotor_joint``, ``diagnostics_period``;
-    ``solver_workers`` (0 = solve in this process), ``solve_timeout`` (s, NaN = ``deadline``, ≥ 3 s); ``live_rate``
-    (Hz, 0 = off), ``live_power_fraction``, ``live_max_state_age`` (s), ``standby_max_age`` (s);
-    ``estimate_weight``, ``weight_estimate_window`` (s), ``weight_estimate_step``, ``weight_estimate_error``;
-    ``estimate_disturbance``, ``disturbance_gain``.
+    Parameters: ``helireach_planner --help``; what each does: docs/guides/planner-node.md.
     """
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_planner", **node_options)
-        declare = partial(declare_checked_parameter, self)
         load_aircraft = declare_aircraft(self)
-        settings_file = declare("planner_settings", "", "planner settings file ('' = config/planner.yaml)")
-        envelope_file = declare("envelope_file", "", "envelope for warm starts/fallbacks ('' = shipped, 'none' = off)")
-        self._deadline = declare("deadline", 0.25, "fallback if no plan this long after the failure, s", (0.001, 60.0))
-        self._replan_period = declare("replan_period", 0.25, "closed-loop re-planning period, s (0 = off)", (0.0, 60.0))
-        self._replan_min_height = declare("replan_min_height", 0.5, "no re-planning below this height, m", (0.0, 1e3))
-        self._replan_min_remaining = declare(
-            "replan_min_remaining", 0.3, "no re-planning when the plan has less time left, s", (0.0, 60.0)
-        )
-        self._state_timeout = declare("state_timeout", 0.5, "older states are not planned from, s", (0.01, 60.0))
-        self._max_message_age = declare(
-            "max_message_age", 1.0, "first plan from a state later after the failure = late, s", (0.001, 3600.0)
-        )
-        self._assume_total_power_loss = declare(
-            "assume_total_power_loss", True, "plan with zero engine power (else the measured power)"
-        )
-        warm_up = declare("warm_up", True, "solve one landing at startup (first-call costs)")
-        self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "frame of the landing path")
-        self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "JointState joint of the main rotor")
-        diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
-        solver_workers = declare("solver_workers", 2, "solver worker processes (0 = solve in this process)", (0, 16))
-        solve_timeout = declare(
-            "solve_timeout",
-            math.nan,
-            "a worker's failure plan not back this long = hung, s (NaN = deadline, at least 3 s)",
-            (0.001, 600.0),
-        )
+        self.config = config = declare_parameters(self, PlannerParameters)
         # Not the deadline itself by default: a slow solve is not a hung one, and its plan must still replace the
         # deadline's fallback (a dead worker is seen at once whatever the timeout).
-        self._solve_timeout = max(self._deadline, _MIN_SOLVE_TIMEOUT_S) if math.isnan(solve_timeout) else solve_timeout
-        reaction_delay = declare(
-            "reaction_delay",
-            math.nan,
-            "s the controls stay at the pre-failure trim before a failure plan starts (NaN = the planner settings')",
-            (0.0, 10.0),
-        )
-        self._reaction_delay = reaction_delay  # NaN until the settings are loaded
-        live_rate = declare("live_rate", 5.0, "live evaluations before a failure, Hz (0 = off)", (0.0, 100.0))
-        live_power_fraction = declare(
-            "live_power_fraction", 0.0, "engine power left after the assumed failure, of the measured power", (0.0, 1.0)
-        )
-        live_max_state_age = declare(
-            "live_max_state_age", 0.3, "an older state is not evaluated live, s", (0.001, 60.0)
-        )
-        standby_max_age = declare(
-            "standby_max_age",
-            0.3,
-            "standby plan only from a state at most this much older than the failure, s",
-            (0.001, 60.0),
-        )
-        self._estimate_weight = declare(
-            "estimate_weight", False, "plan for the gross weight estimated from the steady flight before a failure"
-        )
-        self._weight_window = declare(
-            "weight_estimate_window", 1.0, "steady flight averaged for the weight estimate, s", (0.1, 30.0)
-        )
-        self._weight_step = declare(
-            "weight_estimate_step", 0.005, "quantum of the estimated relative weight change", (0.001, 0.05)
-        )
-        self._weight_error = declare(
-            "weight_estimate_error",
-            0.02,
-            "estimates outside the uncertainty set's weight range widened by this fraction are refused",
-            (0.0, 0.2),
-        )
-        self._estimate_disturbance = declare(
-            "estimate_disturbance",
-            True,
-            "re-plan for the model plus the disturbance accelerations learnt from each re-planning interval",
-        )
-        self._disturbance_gain = declare(
-            "disturbance_gain", 0.3, "fraction of each interval's prediction error the estimate takes", (0.01, 1.0)
-        )
-        robust_verification = declare(
-            "robust_verification",
-            False,
-            "verify each failure plan robustly in a low-priority process (the plan is published 'robust: pending')",
-        )
-        self._robust_uncertainty = declare(
-            "robust_uncertainty", "", "uncertainty set of the robust verification ('' = config/uncertainty.yaml)"
+        self._solve_timeout = (
+            max(config.deadline, _MIN_SOLVE_TIMEOUT_S) if math.isnan(config.solve_timeout) else config.solve_timeout
         )
         self._live_settings = (
             LiveSettings(
-                rate_hz=live_rate,
-                power_fraction=live_power_fraction,
-                max_state_age_s=live_max_state_age,
-                standby_max_age_s=standby_max_age,
+                rate_hz=config.live_rate,
+                power_fraction=config.live_power_fraction,
+                max_state_age_s=config.live_max_state_age,
+                standby_max_age_s=config.standby_max_age,
             )
-            if live_rate > 0.0
+            if config.live_rate > 0.0
             else None
         )
 
         self._lock = threading.Lock()  # latest state, weight tracker
         self.supervisor = LandingSupervisor(
             SupervisorSettings(
-                deadline=self._deadline,
-                replan_min_height=self._replan_min_height,
-                replan_min_remaining=self._replan_min_remaining,
-                max_message_age=self._max_message_age,
+                deadline=self.config.deadline,
+                replan_min_height=self.config.replan_min_height,
+                replan_min_remaining=self.config.replan_min_remaining,
+                max_message_age=self.config.max_message_age,
             )
         )
         self._odometry: tuple[OdometryReading, int, str] | None = None
@@ -222,21 +127,30 @@ class LandingPlannerNode(Node):
         self._live_frame = rm.DEFAULT_BODY_FRAME  # vehicle frame of the standby verdict's state
         self._standby_messages: PlanMessages | None = None  # the standby's messages, built when its verdict came
 
+        self._backend: PlannerBackend | None = None  # None = not configured (a broken airframe or settings file)
         self.planner: Any | None = None  # the in-process LandingPlanner, or the SolverPool; None = not configured
-        self._airframe_problems: list[str] = []  # derived figures outside helicopter ranges (a unit mistake?)
-        self._pool: SolverPool | None = None
+        self._pool: Any | None = None  # the SolverPool (solver_workers >= 1)
+        self._robust: Any | None = None  # a BackgroundRobustVerification when robust_verification is on
         self.envelope: Any | None = None
         self._setup_error = ""
-        self._weights: WeightTracker | None = None  # None: no estimation (off, or not configured)
-        self._weights_off_reason = "estimate_weight is false"
-        self._built_weights: set[float] = set()  # in-process planners built (solver_workers = 0)
-        self._robust: Any | None = None  # a BackgroundRobustVerification when robust_verification is on
         self.robust_verdicts: list[tuple[tuple[int, int, int], Any | None]] = []  # published: (key, summary|None)
+        backend = BackendSettings(
+            envelope_file=config.envelope_file,
+            solver_workers=config.solver_workers,
+            warm_up=config.warm_up,
+            solve_timeout_s=self._solve_timeout,
+            reaction_delay_s=config.reaction_delay,
+            estimate_weight=self.config.estimate_weight,
+            weight_window_s=self.config.weight_estimate_window,
+            weight_step=self.config.weight_estimate_step,
+            weight_error=self.config.weight_estimate_error,
+            robust_policy=self._replanning_policy() if config.robust_verification else None,
+            robust_uncertainty=self.config.robust_uncertainty,
+        )
         try:
-            self._setup_core(load_aircraft, settings_file, envelope_file, warm_up, solver_workers)
-            self._setup_weight_estimation()
-            if robust_verification:
-                self._setup_robust_verification()
+            from helireach_ros.core.settings import load_settings
+
+            self._start_backend(load_aircraft(), load_settings(config.planner_settings or None), backend)
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
             self._setup_error = f"{type(error).__name__}: {error}"
             self.get_logger().error(f"planner not configured, no plans will be made: {self._setup_error}")
@@ -264,7 +178,7 @@ class LandingPlannerNode(Node):
         )
         # Inputs through a QosWatch: an incompatible publisher is an ERROR "<node>: QoS" on /diagnostics. The
         # failure event stays RELIABLE (one message per failure must not be lost; a best-effort one is reported).
-        self._qos_watch = QosWatch(self, diagnostics_period)
+        self._qos_watch = QosWatch(self, config.diagnostics_period)
         self._qos_watch.create_subscription(Odometry, rm.TOPIC_STATE, self._on_state, rm.SENSOR_QOS)
         self._qos_watch.create_subscription(JointState, rm.TOPIC_ROTOR_STATE, self._on_rotor, rm.SENSOR_QOS)
         self._qos_watch.create_subscription(Header, rm.TOPIC_FAILURE_EVENT, self._on_failure_event, rm.EVENT_QOS)
@@ -274,10 +188,10 @@ class LandingPlannerNode(Node):
         # A periodic check, never cancelled or reset from the solver thread (cancelling a timer that the
         # executor is about to fire raises inside the executor). Every half deadline:
         # the fallback goes out within 1.5 deadlines without waking the executor needlessly.
-        self.create_timer(max(self._deadline / 2.0, 0.005), self._on_deadline)
-        if self._replan_period > 0.0:
-            self.create_timer(self._replan_period, self._on_replan_timer)
-        self.create_timer(diagnostics_period, self._publish_diagnostics)
+        self.create_timer(max(self.config.deadline / 2.0, 0.005), self._on_deadline)
+        if self.config.replan_period > 0.0:
+            self.create_timer(self.config.replan_period, self._on_replan_timer)
+        self.create_timer(config.diagnostics_period, self._publish_diagnostics)
         self._live_publisher = self.create_publisher(
             DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
@@ -285,139 +199,42 @@ class LandingPlannerNode(Node):
             self.create_timer(1.0 / self._live_settings.rate_hz, self._on_live_timer)
 
     # -- startup -----------------------------------------------------------------------------------------------
-    def _setup_core(
-        self,
-        load_aircraft: Callable[[], Any],
-        settings_file: str,
-        envelope_file: str,
-        warm_up: bool,
-        solver_workers: int,
-    ) -> None:
-        """Loads airframe, settings and envelope; starts the solver pool, or builds the NLP here and warms it up."""
-        from helireach_ros.core.airframe_plausibility import implausible_figures
-        from helireach_ros.core.model import initial_state_after_failure
-        from helireach_ros.core.planner import get_planner
-        from helireach_ros.core.settings import load_settings
-
-        started = time.perf_counter()
-        # Today's weight and density altitude change the model, hence the NLP and which envelope matches
-        # (one made for other conditions is refused: cold starts, autorotation-entry fallback).
-        self.airframe = load_aircraft()
-        self._airframe_problems = implausible_figures(self.airframe)
-        self.settings = load_settings(settings_file or None)
-        if math.isnan(self._reaction_delay):
-            self._reaction_delay = self.settings.reaction_delay_s
-        self.envelope, self._envelope_note = self._load_envelope(envelope_file)
-        self.warm_up_ms = math.nan
-        if solver_workers > 0:
-            # The workers build and warm up their own NLPs; the fallback needs airframe/settings/envelope only.
-            self._pool = SolverPool(
-                self.airframe,
-                self.settings,
-                SolverPoolSettings(workers=solver_workers, warm_up=warm_up, default_timeout_s=self._solve_timeout),
-            )
-            self.planner = self._pool
-            if not self._pool.wait_ready(_POOL_READY_TIMEOUT_S):
-                self.get_logger().error(
-                    f"no solver worker ready after {_POOL_READY_TIMEOUT_S:g} s (last error: "
-                    f"{self._pool.last_error or 'none'}): failures get fallbacks until one is"
-                )
-        else:
-            self.planner = get_planner(self.airframe, self.settings)
-        if warm_up and self._pool is None:
-            state = initial_state_after_failure(self.airframe, 500.0 * FT, 75.0 * KT)
-            stored = (
-                self.envelope.nearest_plan(state.height, state.forward_speed, -state.descent_rate)
-                if self.envelope
-                else None
-            )
-            warm_up_started = time.perf_counter()
-            self.planner.plan(state.as_array(), stored.warm_start if stored else None)
-            self.warm_up_ms = 1e3 * (time.perf_counter() - warm_up_started)
-        self.startup_s = time.perf_counter() - started
-        where = f"{solver_workers} solver workers" if self._pool is not None else "solving in this process"
-        self.get_logger().info(
-            f"planner ready for {self.airframe.name} ({self.settings.method}, {self.settings.intervals} intervals) "
-            f"in {self.startup_s:.2f} s, {where}; {self._envelope_note}"
+    def _start_backend(self, airframe: Any, settings: Any, backend_settings: BackendSettings) -> None:
+        """Loads the envelope, starts the solver pool (or builds the NLP here and warms it up), the estimators."""
+        logger = self.get_logger()
+        report = {"error": logger.error, "warning": logger.warning, "info": logger.info}
+        # Today's weight and density altitude change the model, hence the NLP and which envelope matches (one made
+        # for other conditions is refused: cold starts, autorotation-entry fallback).
+        self.airframe, self.settings = airframe, settings
+        backend = PlannerBackend(airframe, settings, backend_settings, lambda level, text: report[level](text))
+        self._backend, self.planner, self._pool, self._robust = backend, backend.planner, backend.pool, backend.robust
+        self.envelope = backend.envelope
+        where = f"{backend_settings.solver_workers} solver workers" if backend.pool else "solving in this process"
+        logger.info(
+            f"planner ready for {airframe.name} ({settings.method}, {settings.intervals} intervals) "
+            f"in {backend.startup_s:.2f} s, {where}; {backend.envelope_note}"
         )
 
-    def _setup_robust_verification(self) -> None:
-        """The background robust verification of failure plans: the uncertainty set's design, the node's policy."""
-        from helireach_ros.core.background_verification import BackgroundRobustVerification
+    def _replanning_policy(self) -> Any:
+        """This node's re-planning policy as the closed loop flies it (what the robust verification checks)."""
         from helireach_ros.core.closed_loop import ClosedLoopSettings
-        from helireach_ros.core.uncertainty import DEFAULT_UNCERTAINTY_FILE, load_uncertainty_set
 
-        uncertainty = load_uncertainty_set(self._robust_uncertainty or DEFAULT_UNCERTAINTY_FILE)
-        models = uncertainty.verification_design()
-        policy = ClosedLoopSettings(
-            replan_period=self._replan_period if self._replan_period > 0.0 else _NO_REPLANNING_PERIOD_S,
-            min_height=self._replan_min_height,
-            min_remaining=self._replan_min_remaining,
-            estimate_disturbance=self._estimate_disturbance,
-            disturbance=DisturbanceSettings(gain=self._disturbance_gain),
+        return ClosedLoopSettings(
+            replan_period=self.config.replan_period if self.config.replan_period > 0.0 else _NO_REPLANNING_PERIOD_S,
+            min_height=self.config.replan_min_height,
+            min_remaining=self.config.replan_min_remaining,
+            estimate_disturbance=self.config.estimate_disturbance,
+            disturbance=DisturbanceSettings(gain=self.config.disturbance_gain),
         )
-        design = f"resolution-IV corners of {uncertainty.name!r} ({len(models)})"
-        self._robust = BackgroundRobustVerification(models, design, policy)
-        self._robust.prepare(self.airframe, self._robust_settings())
-        self.get_logger().info(f"robust verification of failure plans on: {design}, in a low-priority process")
-
-    def _robust_settings(self) -> Any:
-        """The planner settings with this node's reaction delay (what its failure plans are made with)."""
-        if self._reaction_delay == self.settings.reaction_delay_s:
-            return self.settings
-        return self.settings.replace(reaction_delay_s=self._reaction_delay)
-
-    def _setup_weight_estimation(self) -> None:
-        """The weight tracker, its band from the uncertainty set; an unreadable set disables it (file's weight)."""
-        self._built_weights = {self.airframe.gross_weight}
-        if not self._estimate_weight:
-            return
-        from helireach_ros.core.uncertainty import load_uncertainty_set
-
-        try:
-            band = plausible_band(load_uncertainty_set(), self._weight_error)
-        except Exception as error:  # a broken uncertainty file must not stop the planner: plan for the file's weight
-            self._weights_off_reason = f"no plausible weight band ({type(error).__name__}: {error})"
-            self.get_logger().error(f"weight estimation off: {self._weights_off_reason}")
-            return
-        settings = WeightTrackingSettings(window_s=self._weight_window, band=band, step=self._weight_step)
-        self._weights = WeightTracker(self.airframe, settings)
 
     def _weight_now(self) -> WeightChoice:
         """The weight to plan for now (the tracker's choice, or the file's with the reason)."""
-        with self._lock:
-            if self._weights is None:
-                return WeightChoice(self.airframe.gross_weight, "file", 0.0, self._weights_off_reason)
-            return self._weights.choice(self._now_ns())
+        assert self._backend is not None  # asked only with a planner
+        return self._backend.weight_now(self._now_ns())
 
     def ready_weights(self) -> set[float]:
         """Weights a ready solver holds (a failure plan for one builds no NLP)."""
-        if self._pool is not None:
-            return self._pool.ready_weights()
-        with self._lock:
-            return set(self._built_weights)
-
-    def _in_process_planner(self, gross_weight: float) -> Any:
-        """The in-process planner for a weight (built at its first use, then cached by get_planner)."""
-        if gross_weight == self.airframe.gross_weight:
-            return self.planner
-        from helireach_ros.core.planner import get_planner
-
-        return get_planner(self.airframe.with_conditions(gross_weight=gross_weight), self.settings)
-
-    def _load_envelope(self, path: str) -> tuple[Any | None, str]:
-        if path.strip().lower() == "none":
-            return None, "no envelope (disabled): cold starts, autorotation-entry fallback"
-        try:
-            from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-
-            resolved = path or str(default_envelope_path())
-            envelope = load_envelope(resolved, self.airframe, self.settings, 0.0)
-            return envelope, f"envelope {envelope.envelope_id} for warm starts and fallbacks"
-        except Exception as error:  # missing or mismatched: plan cold, fall back to the autorotation entry
-            note = f"envelope not usable ({type(error).__name__}: {error}): cold starts, autorotation-entry fallback"
-            self.get_logger().warning(note)
-            return None, note
+        return self._backend.ready_weights() if self._backend is not None else set()
 
     # -- inputs ------------------------------------------------------------------------------------------------
     def _now_ns(self) -> int:
@@ -432,7 +249,7 @@ class LandingPlannerNode(Node):
 
     def _on_rotor(self, message: JointState) -> None:
         try:
-            reading = rm.read_rotor(message, self._rotor_joint)
+            reading = rm.read_rotor(message, self.config.rotor_joint)
         except ValueError:
             return
         if state_problems(StateLimits(), rotor=reading):
@@ -444,13 +261,13 @@ class LandingPlannerNode(Node):
         with self._lock:
             self._rotor = (reading, now_ns)
             odometry = self._odometry
-            if self._weights is not None and before_failure and odometry is not None:
-                if now_ns - odometry[1] <= self._state_timeout * 1e9:
-                    state = odometry[0]
-                    sample = WeightSample(
-                        now_ns, state.forward_speed, state.climb_rate, reading.rotor_speed, reading.engine_power
-                    )
-                    self._weights.add(sample)
+        if self._backend is not None and before_failure and odometry is not None:
+            if now_ns - odometry[1] <= self.config.state_timeout * 1e9:
+                state = odometry[0]
+                sample = WeightSample(
+                    now_ns, state.forward_speed, state.climb_rate, reading.rotor_speed, reading.engine_power
+                )
+                self._backend.add_weight_sample(sample)
 
     def current_state(self, measured_power: bool = False) -> tuple[np.ndarray, int, str, str] | None:
         """(state y, v, Ω, h, z, P; its stamp ns; vehicle frame; rotor-speed source), or None without a fresh state.
@@ -462,7 +279,7 @@ class LandingPlannerNode(Node):
         evaluation applies ``live_power_fraction`` to it).
         """
         now_ns = self._now_ns()
-        timeout_ns = self._state_timeout * 1e9
+        timeout_ns = self.config.state_timeout * 1e9
         with self._lock:
             odometry, rotor = self._odometry, self._rotor
         if odometry is None or now_ns - odometry[1] > timeout_ns:
@@ -473,7 +290,7 @@ class LandingPlannerNode(Node):
             power = rotor[0].engine_power
         else:
             rotor_speed, source, power = self.airframe.nominal_rotor_speed, "assumed_nominal", None
-        if power is None or (self._assume_total_power_loss and not measured_power):
+        if power is None or (self.config.assume_total_power_loss and not measured_power):
             power = 0.0
         rotor_speed = clip_rotor_speed_noise(self.airframe, rotor_speed, _ROTOR_NOISE_TOLERANCE)
         return helicopter_state(reading, rotor_speed, power), reading.stamp_ns, frame, source
@@ -502,8 +319,13 @@ class LandingPlannerNode(Node):
             return
         # The episode's weight, fixed now: the last live evaluation's (no bisection in the failure callback), one a
         # solver holds (never an NLP built in the failure path).
-        if self.planner is not None:
-            why = self._weights_off_reason if self._weights is None else "no live evaluation yet (where NLPs are built)"
+        if self._backend is not None:
+            backend = self._backend
+            why = (
+                backend.weights_off_reason
+                if backend.weights is None
+                else "no live evaluation yet (where NLPs are built)"
+            )
             latest = self._latest_weight or WeightChoice(self.airframe.gross_weight, "file", 0.0, why)
             self._failure_weight = ready_choice(latest, self.airframe.gross_weight, self.ready_weights())
         standby = self._pause_live(failure_stamp_ns)
@@ -578,19 +400,9 @@ class LandingPlannerNode(Node):
             weight = self._weight_now()  # a weight no solver holds yet is built here, before any failure
             self._latest_weight = weight
             done = partial(self._live_done, generation, failure_now, stamp_ns, frame, now_ns, weight)
-            if self._pool is not None:
-                timeout_s = _LIVE_TIMEOUT_FACTOR * self._solve_timeout
+            if self._pool is not None and self._backend is not None:
                 try:
-                    job = self._pool.submit(
-                        failure_now,
-                        warm_start,
-                        PRIORITY_LIVE,
-                        timeout_s,
-                        True,
-                        None,
-                        self._reaction_delay,
-                        weight.gross_weight,
-                    )
+                    job = self._backend.submit_live(failure_now, warm_start, weight.gross_weight)
                 except RuntimeError:  # the pool is closed: the node is being destroyed
                     return
                 self._live_job = job
@@ -605,10 +417,8 @@ class LandingPlannerNode(Node):
         """Without a pool: the live solve on the solver thread (cold check as in the workers)."""
         future: Future = Future()
         try:
-            solve = partial(self._in_process_planner(weight.gross_weight).plan, reaction_delay_s=self._reaction_delay)
-            future.set_result(solve_with_cold_check(solve, state, warm_start))
-            with self._lock:
-                self._built_weights.add(weight.gross_weight)
+            assert self._backend is not None  # live jobs are made only with a planner
+            future.set_result(self._backend.solve_live(state, warm_start, weight.gross_weight))
         except (ValueError, RuntimeError) as error:
             future.set_exception(error)
         done(future)
@@ -647,7 +457,7 @@ class LandingPlannerNode(Node):
                 )
                 self._publish(self._live_publisher, "live reachability", report)
             if standby:  # its messages now, off the executor and outside the lock: the failure only publishes them
-                messages = plan_messages(verdict.plan, stamp_ns, frame, self._world_frame)
+                messages = plan_messages(verdict.plan, stamp_ns, frame, self.config.world_frame)
                 with self._live_lock:
                     if generation == self._live_generation:
                         self._standby_messages = messages
@@ -681,10 +491,8 @@ class LandingPlannerNode(Node):
         """Stops the solver workers (their jobs fail), lets a running in-process solve finish (queued ones are
         dropped), then destroys the node."""
         self._pause_live()  # the jobs failed by closing the pool are not verdicts
-        if self._pool is not None:
-            self._pool.close()
-        if self._robust is not None:
-            self._robust.close()
+        if self._backend is not None:
+            self._backend.close()
         self._solver_thread.shutdown(wait=True, cancel_futures=True)
         super().destroy_node()
 
@@ -727,10 +535,10 @@ class LandingPlannerNode(Node):
         self._publish_plan(failure, plan, stamp_ns, frame, source, rotor_source, replan=False, robust_pending=robust)
         if robust:  # after publishing: off the failure path
             self._submit_robust(failure, plan, stamp_ns)
-        if self._estimate_disturbance and failure.disturbance is None:  # after publishing: off the failure path
-            weight = self.episode_weight.gross_weight
-            model = self.airframe if weight == self.airframe.gross_weight else self.airframe.with_conditions(weight)
-            failure.disturbance = DisturbanceTracker(model, DisturbanceSettings(gain=self._disturbance_gain))
+        if self.config.estimate_disturbance and failure.disturbance is None:  # after publishing: off the failure path
+            assert self._backend is not None  # a plan came from it
+            model = self._backend.model_for(self.episode_weight.gross_weight)
+            failure.disturbance = DisturbanceTracker(model, DisturbanceSettings(gain=self.config.disturbance_gain))
             failure.disturbance.update(stamp_ns * 1e-9, state, _controls_from_stamp(plan, stamp_ns))  # 1st interval
 
     def _solve(
@@ -741,29 +549,14 @@ class LandingPlannerNode(Node):
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
     ) -> tuple[Any | None, str]:
-        """A failure plan or re-plan (blocking; on the solver thread): (plan, "") or (None, why not).
-
-        ``initial_control``/``reaction_delay_s``: None for a failure plan (trim before the failure, the node's
-        reaction delay); a re-plan passes the control being flown and 0, and the disturbance estimate.
-        """
-        delay = self._reaction_delay if reaction_delay_s is None else reaction_delay_s
-        weight = self.episode_weight.gross_weight  # one the solvers hold (fixed at the failure)
-        try:
-            if self._pool is None:
-                planner = self._in_process_planner(weight)
-                return planner.plan(state, warm_start, initial_control, delay, disturbance=disturbance), ""
-            future = self._pool.submit(
-                state, warm_start, PRIORITY_FAILURE, self._solve_timeout, False, initial_control, delay, weight,
-                disturbance,
-            )  # fmt: skip
-            try:
-                # The pool fails the job solve_timeout after a worker took it; the extra wait covers the queue.
-                return future.result(timeout=self._solve_timeout + _QUEUE_WAIT_S), ""
-            except FutureTimeoutError:
-                future.cancel()
-                return None, f"no solver worker took the job within {self._solve_timeout + _QUEUE_WAIT_S:g} s"
-        except (ValueError, RuntimeError) as error:  # SolverWorkerError is a RuntimeError
-            return None, f"{type(error).__name__}: {error}"
+        """A failure plan or re-plan for the episode's weight (blocking; on the solver thread): (plan, "") or (None,
+        why not); see :meth:`PlannerBackend.solve`."""
+        if self._backend is None:
+            return None, f"planner not configured ({self._setup_error})"
+        return self._backend.solve(
+            state, warm_start, gross_weight=self.episode_weight.gross_weight, initial_control=initial_control,
+            reaction_delay_s=reaction_delay_s, disturbance=disturbance,
+        )  # fmt: skip
 
     def _on_deadline(self) -> None:
         self._publish_robust_verdicts()
@@ -772,10 +565,10 @@ class LandingPlannerNode(Node):
             return
         current = self.current_state()
         if current is None:
-            self._publish_status_only(failure, f"no plan within {self._deadline:g} s and no valid state")
+            self._publish_status_only(failure, f"no plan within {self.config.deadline:g} s and no valid state")
             return
         state, stamp_ns, _, _ = current
-        self._publish_fallback(failure, state, stamp_ns, f"no plan within the {self._deadline:g} s deadline")
+        self._publish_fallback(failure, state, stamp_ns, f"no plan within the {self.config.deadline:g} s deadline")
 
     def _on_replan_timer(self) -> None:
         action, failure = self.supervisor.timer_action(planner_ready=self.planner is not None)
@@ -827,7 +620,9 @@ class LandingPlannerNode(Node):
     # -- fallbacks -----------------------------------------------------------------------------------------------
     def fallback_plan(self, state: np.ndarray) -> FallbackPlan:
         """The best available controls without a converged solve (:func:`helireach_ros.core.fallback.fallback_plan`)."""
-        return fallback_plan(state, self.airframe, self.settings, self.envelope)
+        if self._backend is None:
+            raise RuntimeError(f"planner not configured ({self._setup_error})")
+        return self._backend.fallback_plan(state)
 
     def _publish_fallback(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, reason: str) -> None:
         try:
@@ -909,8 +704,8 @@ class LandingPlannerNode(Node):
                 failure.failure_id, failure.replans, stamp_ns, plan, False, (now_ns - reference_ns) * 1e-6, now_ns,
                 warm_source,
             )  # fmt: skip
-            if messages is None or not messages.matches(plan, stamp_ns, frame, self._world_frame):
-                messages = plan_messages(plan, stamp_ns, frame, self._world_frame)
+            if messages is None or not messages.matches(plan, stamp_ns, frame, self.config.world_frame):
+                messages = plan_messages(plan, stamp_ns, frame, self.config.world_frame)
             self._trajectory_publisher.publish(messages.trajectory_cdr)
             self._path_publisher.publish(messages.path_cdr)
             report = converged_plan_report(
@@ -936,11 +731,10 @@ class LandingPlannerNode(Node):
 
     def _submit_robust(self, failure: FailureEpisode, plan: Any, stamp_ns: int) -> None:
         """Queues the plan's robust verification and publishes its verdict as pending."""
-        weight = self.episode_weight.gross_weight
-        model = self.airframe if weight == self.airframe.gross_weight else self.airframe.with_conditions(weight)
         key = (failure.failure_id, failure.event_stamp_ns, stamp_ns)
-        assert self._robust is not None  # called only with robust verification on
-        self._robust.submit(key, model, self._robust_settings(), plan)
+        assert self._robust is not None and self._backend is not None  # called only with robust verification on
+        model = self._backend.model_for(self.episode_weight.gross_weight)
+        self._robust.submit(key, model, self._backend.robust_settings(), plan)
         self._publish_robust(key, None)
 
     def _publish_robust_verdicts(self) -> None:
@@ -972,7 +766,8 @@ class LandingPlannerNode(Node):
         return self.supervisor.failure_active
 
     def _publish_diagnostics(self) -> None:
-        if self.planner is None:
+        backend = self._backend
+        if backend is None:
             status = rm.diagnostic_status(
                 DiagnosticStatus.ERROR,
                 f"{self.get_name()}: planner",
@@ -987,9 +782,9 @@ class LandingPlannerNode(Node):
         health = PlannerHealth(
             airframe=self.airframe.name,
             method=self.settings.method,
-            startup_s=self.startup_s,
-            warm_up_ms=self.warm_up_ms,
-            envelope_note=self._envelope_note,
+            startup_s=backend.startup_s,
+            warm_up_ms=backend.warm_up_ms,
+            envelope_note=backend.envelope_note,
             has_envelope=self.envelope is not None,
             failures=self.supervisor.failure_count,
             solving=self.solving,
@@ -997,7 +792,7 @@ class LandingPlannerNode(Node):
             solve_timeout_s=self._solve_timeout,
             ready_weights=len(self.ready_weights()),
             weight_now=self._weight_now(),
-            airframe_problems=tuple(self._airframe_problems),
+            airframe_problems=tuple(backend.airframe_problems),
             pool=None
             if pool is None
             else SolverPoolHealth(
