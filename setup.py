@@ -22,7 +22,7 @@ setup(
     name=package_name,
     version="0.1.0",
     packages=find_packages(exclude=["test", "test.*", "bench"]),
-    package_data={package_name + ".display": ["web/*"], package_name + ".core": ["block_ldl.c"]},
+    package_data={package_name + ".display": ["web/*"], package_name + ".core.ocp": ["block_ldl.c"]},
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),

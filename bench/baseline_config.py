@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import dataclasses
 
-from helireach_ros.core.compiled_nlp import CodegenSettings
-from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
+from helireach_ros.core.ocp.settings import PlannerSettings
 
 __all__ = [
     "LEGACY_CONFIGURATION",

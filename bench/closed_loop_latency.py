@@ -4,7 +4,7 @@ Run: .venv/bin/python bench/closed_loop_latency.py [--scenario demo_500ft_75kt] 
      [--latencies 0.05 0.1 0.2 0.3 0.4 0.5 0.6 0.8 1.0] [--replan-period 0.25] [--json]
 
 For each latency and noise seed it flies the scenario with
-:func:`~helireach_ros.core.closed_loop.fly_closed_loop` (the planner node's re-planning policy in lock-step
+:func:`~helireach_ros.core.robustness.closed_loop.fly_closed_loop` (the planner node's re-planning policy in lock-step
 simulated time: every plan reaches the vehicle ``latency`` seconds after the measurement it starts
 from) and prints the touchdown descent rate, forward speed, the rotor-speed range in flight and the
 verdict against the landing limits. The real-time ROS system's latency is measured by
@@ -20,11 +20,11 @@ import time
 
 from _common import Record, add_json_argument, loadavg_text
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.settings import load_settings
-from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.flight.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.units import FT, KT
 
 

@@ -29,12 +29,12 @@ import numpy as np
 from _common import ENVELOPE_GRID, Record, StateGrid, add_json_argument, loadavg_text, machine_text
 from baseline_config import baseline_codegen, baseline_settings
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
 from helireach_ros.core.envelope.compute import EnvelopeJob, _solve_point, _warm_start_of, compute_envelope
 from helireach_ros.core.envelope.data import STATUS_CODES
 from helireach_ros.core.envelope.workers import make_executor
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import get_planner
 
 
 def _baseline_job(job: EnvelopeJob) -> EnvelopeJob:

@@ -20,10 +20,10 @@ import sys
 
 from _common import command_line, loadavg_text
 
-from helireach_ros.core.airframe import Airframe, load_airframe
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.aircraft.airframe import Airframe, load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import LandingPlanner
 from helireach_ros.core.units import FT, KT
 
 

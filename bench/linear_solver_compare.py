@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 from _common import ENVELOPE_GRID, StateGrid, command_line, loadavg_text, summary
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.compiled_nlp import CodegenSettings
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import LandingPlanner
 from helireach_ros.core.units import FT, KT
 
 

@@ -26,13 +26,13 @@ import time
 import numpy as np
 from _common import command_line, loadavg_text, machine_text, summary, summary_text
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, failure_now_state
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner, plan_landing
-from helireach_ros.core.settings import load_settings
-from helireach_ros.core.solver_pool import PRIORITY_LIVE, SolverPool, SolverPoolSettings
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import get_planner, plan_landing
+from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, failure_now_state
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.workers.solver_pool import PRIORITY_LIVE, SolverPool, SolverPoolSettings
 
 FPM = FT / 60.0
 

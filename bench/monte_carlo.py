@@ -6,9 +6,9 @@ Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed
      [--replan-periods 0.25 0.1] [--state-gains 1 0.5] [--planner-models nominal truth] [--noise set none]
      [--truth-check] [--json]
 
-Each run is the lock-step closed loop (:func:`~helireach_ros.core.closed_loop.fly_closed_loop`, the planner
+Each run is the lock-step closed loop (:func:`~helireach_ros.core.robustness.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
-latency are drawn uniformly from the uncertainty set (:mod:`helireach_ros.core.uncertainty`), with the
+latency are drawn uniformly from the uncertainty set (:mod:`helireach_ros.core.flight.uncertainty`), with the
 set's sensor noise, after a total power loss from level trim. The planner keeps the nominal model. Run
 ``seed`` flies initial state ``seed mod len(states)``; its draw and its noise come from ``seed`` alone, so
 ``--seeds S`` repeats a run exactly.
@@ -37,11 +37,13 @@ failures into those and the ones the policy lost.
 
 Re-planning policies (``--policies``, each ``none`` or a ``+``-joined set; every policy is run with every
 margin setting, on the same draws): ``weight``: plan for the gross weight estimated from the engine power of
-the steady flight before the failure (:mod:`helireach_ros.core.estimation`, which also absorbs the drag and
+the steady flight before the failure (:mod:`helireach_ros.core.estimation.gross_weight`, which also absorbs the drag and
 c_d errors into that weight); ``disturbance``: re-plan for the model plus the disturbance accelerations
-learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.disturbance`); ``latency``: each
+learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.estimation.disturbance`);
+``latency``: each
 re-plan starts from the current plan flown ahead in the model for the latency
-(:attr:`~helireach_ros.core.closed_loop.ClosedLoopSettings.compensate_latency`). ``--state-gains``: the disturbance
+(:attr:`~helireach_ros.core.robustness.closed_loop.ClosedLoopSettings.compensate_latency`). ``--state-gains``: the
+disturbance
 estimate's state gain α (below 1 an α–β observer whose filtered state the plans start from).
 
 Re-planning periods (``--replan-periods``): s between re-plans (the planner node's ``replan_period``); each is run
@@ -57,7 +59,7 @@ what the noise alone costs.
 
 Objectives (``--objectives``, the planner settings' ``objective``; each is run with every policy and margin
 setting, on the same draws): ``terminal`` (the touchdown cost, limits hard) or ``reach_avoid`` (the worst
-normalised margin, :class:`~helireach_ros.core.settings.PlannerSettings`).
+normalised margin, :class:`~helireach_ros.core.ocp.settings.PlannerSettings`).
 """
 
 from __future__ import annotations
@@ -74,20 +76,20 @@ from functools import lru_cache
 import numpy as np
 from _common import Record, add_json_argument, loadavg_text, summary
 
-from helireach_ros.core.airframe import Airframe, load_airframe
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.disturbance import DisturbanceSettings
+from helireach_ros.core.aircraft.airframe import Airframe, load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.robust_verification import model_vehicle, own_landing
-from helireach_ros.core.settings import OBJECTIVES, PlannerSettings, load_settings
-from helireach_ros.core.simulation import Scenario, SensorNoise, load_scenario
-from helireach_ros.core.uncertainty import (
+from helireach_ros.core.estimation.disturbance import DisturbanceSettings
+from helireach_ros.core.flight.simulation import Scenario, SensorNoise, load_scenario
+from helireach_ros.core.flight.uncertainty import (
     DEFAULT_UNCERTAINTY_FILE,
     PerturbedModel,
     UncertaintySet,
     load_uncertainty_set,
 )
+from helireach_ros.core.ocp.settings import OBJECTIVES, PlannerSettings, load_settings
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
+from helireach_ros.core.robustness.verification import model_vehicle, own_landing
 from helireach_ros.core.units import FT, KT
 
 NEAR_BOUNDARY_HEIGHTS_FT = (100.0, 200.0, 250.0, 300.0, 350.0, 400.0, 450.0, 550.0)

@@ -30,11 +30,11 @@ import numpy as np
 import yaml
 from _common import COARSE_GRID, REPOSITORY, Record, add_json_argument, loadavg_text, summary
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import get_planner
 from helireach_ros.core.units import FT, KT
 
 OBJECTIVES = ("terminal", "reach_avoid")

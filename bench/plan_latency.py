@@ -16,7 +16,7 @@ replay, which follows every solve, is timed separately. Prints what it measured 
 ``--baseline`` also runs the legacy configuration (IPOPT's warm-solver options of then,
 plain CasADi functions, MUMPS), the warm options alone, (verified, flyable) the six-state NLP, distance and engine
 power as NLP variables (``closed_form_states`` off), and the current NLP with MUMPS instead of the block LDL^T
-(:mod:`helireach_ros.core.block_ldl`), on the same states (each configuration warm-starts from its
+(:mod:`helireach_ros.core.ocp.block_ldl`), on the same states (each configuration warm-starts from its
 own cold plan of the same state, since the NLPs' layouts differ; the re-plans from the same recorded warm starts),
 interleaved state by state so that load changes hit every configuration alike, and prints each
 configuration's total solve time as a ratio to the baseline's (the comparison that holds on a busy
@@ -33,13 +33,13 @@ import numpy as np
 from _common import Record, StateGrid, add_json_argument, loadavg_text, machine_text, summary, summary_text
 from baseline_config import baseline_codegen, baseline_settings, six_state_settings, with_mumps
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.compiled_nlp import CodegenSettings
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner, WarmStart
-from helireach_ros.core.settings import PlannerSettings, load_settings
-from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.flight.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
+from helireach_ros.core.ocp.settings import PlannerSettings, load_settings
+from helireach_ros.core.planning.planner import LandingPlanner, WarmStart
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.units import FT, KT
 
 _COMMIT_HEIGHT_FT = 20.0  # the flyable plans' commit height: below it, at speed, the NLP is nearly infeasible

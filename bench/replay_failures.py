@@ -20,10 +20,10 @@ import time
 import numpy as np
 from _common import COARSE_GRID, Record, StateGrid, add_json_argument, loadavg_text, summary
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.settings import PlannerSettings
+from helireach_ros.core.planning.planner import get_planner
 from helireach_ros.core.units import FT, KT
 
 VARIANTS = {

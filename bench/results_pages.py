@@ -440,7 +440,8 @@ PAGES = (
     Page(
         "closed-loop.md",
         "Closed loop",
-        "Landings flown closed loop in lock-step simulated time (`helireach_ros.core.closed_loop`, the planner "
+        "Landings flown closed loop in lock-step simulated time (`helireach_ros.core.robustness.closed_loop`, the "
+        "planner "
         "node's re-planning policy), judged against the airframe's landing limits.",
         (
             Section(

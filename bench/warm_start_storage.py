@@ -23,11 +23,11 @@ import warnings
 import numpy as np
 from _common import command_line, loadavg_text, summary
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.data import default_envelope_path, read_envelope_file
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart, get_planner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import ControlFunctionWarmStart, WarmStart, get_planner
 from helireach_ros.core.units import FT, KT
 
 

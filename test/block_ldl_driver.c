@@ -1,4 +1,4 @@
-/* Drives helireach_ros/core/block_ldl.c through MA27's interface as IPOPT does, for its sanitizer build
+/* Drives helireach_ros/core/ocp/block_ldl.c through MA27's interface as IPOPT does, for its sanitizer build
  * (test_block_ldl.py compiles both with -fsanitize=address,undefined). Reads matrices from standard input, each as
  * "n nz pivot_tolerance", nz lines "i j value" (1-based, one triangle), then n right-hand-side values; for each it
  * analyses, factorizes (growing the workspace when asked, as IPOPT does), factorizes again in the same workspace

@@ -18,8 +18,8 @@ import signal
 
 import pytest
 
-from helireach_ros.core.airframe import Airframe, load_airframe
-from helireach_ros.core.settings import PlannerSettings, load_settings
+from helireach_ros.core.aircraft.airframe import Airframe, load_airframe
+from helireach_ros.core.ocp.settings import PlannerSettings, load_settings
 
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)

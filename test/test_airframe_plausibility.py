@@ -7,8 +7,8 @@ import warnings
 import pytest
 import yaml
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.airframe_plausibility import (
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.plausibility import (
     PLAUSIBILITY_RANGES,
     AirframePlausibilityWarning,
     implausible_figures,

@@ -17,12 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.block_ldl import SOURCE, block_ldl_library, block_ldl_library_path, linear_solver_options
-from helireach_ros.core.compiled_nlp import CodegenSettings, library_intact
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.block_ldl import SOURCE, block_ldl_library, block_ldl_library_path, linear_solver_options
+from helireach_ros.core.ocp.compiled_nlp import CodegenSettings, library_intact
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import LandingPlanner
 from helireach_ros.core.units import FT, KT
 
 TEST_DIR = Path(__file__).parent

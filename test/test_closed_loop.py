@@ -11,9 +11,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.simulation import Scenario, SimulatedVehicle, load_scenario
+from helireach_ros.core.flight.simulation import Scenario, SimulatedVehicle, load_scenario
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
 from helireach_ros.core.units import FT, KT
 
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numpy.polynomial import polynomial
 
-from helireach_ros.core.collocation import (
+from helireach_ros.core.ocp.collocation import (
     lagrange_basis_derivatives,
     lagrange_basis_values,
     lgr_points,

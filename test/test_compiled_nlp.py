@@ -11,12 +11,12 @@ import shutil
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.block_ldl import block_ldl_library_path
-from helireach_ros.core.compiled_nlp import CodegenSettings, library_path, nlp_key
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner
-from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.block_ldl import block_ldl_library_path
+from helireach_ros.core.ocp.compiled_nlp import CodegenSettings, library_path, nlp_key
+from helireach_ros.core.ocp.settings import PlannerSettings
+from helireach_ros.core.planning.planner import LandingPlanner
 from helireach_ros.core.units import FT, KT
 
 pytestmark = [pytest.mark.build]

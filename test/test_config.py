@@ -6,9 +6,9 @@ import math
 import pytest
 import yaml
 
-from helireach_ros.core.airframe import ConfigError, isa_density, load_airframe, parse_airframe
+from helireach_ros.core.aircraft.airframe import ConfigError, isa_density, load_airframe, parse_airframe
+from helireach_ros.core.ocp.settings import PlannerSettings, load_settings
 from helireach_ros.core.resources import config_path
-from helireach_ros.core.settings import PlannerSettings, load_settings
 
 
 @pytest.fixture(scope="module")

@@ -46,11 +46,11 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState
-from helireach_ros.core.flight_phase import plan_cue_events
-from helireach_ros.core.plan_status import plan_values
+from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState
+from helireach_ros.core.policies.flight_phase import plan_cue_events
+from helireach_ros.core.policies.plan_status import plan_values
 from helireach_ros.core.units import FT, KT
 from helireach_ros.display.node import CockpitDisplay
 from helireach_ros.display.pilot_units import axis_margins
@@ -433,8 +433,8 @@ def isolated_dds(no_ros_discovery: None) -> None:
 
 @pytest.fixture(scope="module")
 def real_plan() -> Any:
-    from helireach_ros.core.model import initial_state_after_failure
-    from helireach_ros.core.planner import plan_landing
+    from helireach_ros.core.aircraft.model import initial_state_after_failure
+    from helireach_ros.core.planning.planner import plan_landing
 
     airframe = load_airframe("uh60a_class")
     plan = plan_landing(initial_state_after_failure(airframe, 500 * FT, 75 * KT), airframe)

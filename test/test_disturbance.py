@@ -15,16 +15,25 @@ import math
 import numpy as np
 import pytest
 
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker, observe_interval, predict_state
-from helireach_ros.core.model import disturbed_dynamics_function, dynamics_function, initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.robust_verification import model_vehicle
-from helireach_ros.core.simulation import ControlSchedule, Scenario, SimulatedVehicle, load_scenario
-from helireach_ros.core.transcription.base import DecodedPlan
-from helireach_ros.core.uncertainty import PerturbedModel
+from helireach_ros.core.aircraft.model import (
+    disturbed_dynamics_function,
+    dynamics_function,
+    initial_state_after_failure,
+)
+from helireach_ros.core.estimation.disturbance import (
+    DisturbanceSettings,
+    DisturbanceTracker,
+    observe_interval,
+    predict_state,
+)
+from helireach_ros.core.evidence.replay import replay_plan
+from helireach_ros.core.flight.simulation import ControlSchedule, Scenario, SimulatedVehicle, load_scenario
+from helireach_ros.core.flight.uncertainty import PerturbedModel
+from helireach_ros.core.ocp.transcription.base import DecodedPlan
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
+from helireach_ros.core.robustness.verification import model_vehicle
 from helireach_ros.core.units import FT, KT
-from helireach_ros.core.verification import replay_plan
 
 TRUE_DISTURBANCE = np.array([0.6, -0.2, 0.4])  # m/s², m/s², rad/s²: a heavy, draggy, rotor-fast aircraft
 INTERVAL_S = 0.25

@@ -17,7 +17,8 @@ import zipfile
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.compute import EnvelopeJob, _sweep_column, compute_envelope
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
@@ -35,8 +36,7 @@ from helireach_ros.core.envelope.data import (
 )
 from helireach_ros.core.envelope.grid import parse_list, parse_range
 from helireach_ros.core.envelope.plot import boundary_geometry, plot_envelope
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart, get_planner
+from helireach_ros.core.planning.planner import ControlFunctionWarmStart, WarmStart, get_planner
 from helireach_ros.core.units import FT, KT
 
 HEIGHTS_FT = "0:600:4"

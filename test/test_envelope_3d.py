@@ -18,6 +18,7 @@ from rclpy.parameter import Parameter
 from test_envelope import TIMING_ARRAYS, run_cli, synthetic_envelope
 from test_ros_nodes import Harness, level_is
 
+from helireach_ros.core.aircraft.model import trim_flight
 from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelope
 from helireach_ros.core.envelope.data import (
     FORMAT_VERSION,
@@ -36,7 +37,6 @@ from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.envelope.grid import parse_range
 from helireach_ros.core.envelope.plot import all_slices_figure, envelope_figure
 from helireach_ros.core.envelope.workers import SerialExecutor, make_executor
-from helireach_ros.core.model import trim_flight
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode

@@ -11,16 +11,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.data import (
     FORMAT_VERSION_ANSWERS,
     Envelope,
     default_envelope_path,
     load_envelope,
 )
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import get_planner
 from helireach_ros.core.units import FT, KT
 
 FPM = FT / 60.0
@@ -187,7 +187,7 @@ def test_the_3d_file_answers_at_the_climb_rate_and_not_beyond_its_axis(shipped_3
 def test_every_safe_nodes_stored_plan_lands_as_stored(shipped_3d):
     """A safe node rests on the plan the file holds: its control function, as stored (float32), flown from the
     node's state through the independent replay, lands within every limit."""
-    from helireach_ros.core.verification import replay_controls
+    from helireach_ros.core.evidence.replay import replay_controls
 
     airframe, settings = load_airframe("uh60a_class"), load_settings()
     initial_states = shipped_3d.arrays["plan_initial_state"]

@@ -6,11 +6,11 @@ import dataclasses
 
 import pytest
 
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.estimation import estimate_gross_weight
-from helireach_ros.core.model import trim_flight
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.aircraft.model import trim_flight
+from helireach_ros.core.estimation.gross_weight import estimate_gross_weight
+from helireach_ros.core.flight.simulation import SimulatedVehicle, load_scenario
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.units import FT, KT
 
 

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from helireach_ros.core.failure_episode import (
+from helireach_ros.core.policies.failure_episode import (
     EpisodePhase,
     EpisodeSettings,
     EpisodeState,

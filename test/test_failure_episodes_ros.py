@@ -16,7 +16,7 @@ from std_msgs.msg import Bool, Header
 from test_ros_nodes import TIMEOUT_S, Harness, level_is, monitor_and_planner, trigger_failure
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState
+from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode

@@ -1,4 +1,4 @@
-"""The cockpit's flight phase, banner, touchdown result and cue (helireach_ros.core.flight_phase): pure policy.
+"""The cockpit's flight phase, banner, touchdown result and cue (helireach_ros.core.policies.flight_phase): pure policy.
 
 The cue rules are also checked on a real IPOPT plan (500 ft / 75 kt): every event must sit where its rule says
 in the plan's own controls.
@@ -11,8 +11,8 @@ import math
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.flight_phase import (
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.policies.flight_phase import (
     CueEvent,
     CueSettings,
     FlightPhase,
@@ -179,8 +179,8 @@ def test_cue_rules_on_synthetic_controls() -> None:
 
 
 def test_cues_sit_where_the_real_plan_changes() -> None:
-    from helireach_ros.core.model import initial_state_after_failure
-    from helireach_ros.core.planner import plan_landing
+    from helireach_ros.core.aircraft.model import initial_state_after_failure
+    from helireach_ros.core.planning.planner import plan_landing
 
     airframe = load_airframe("uh60a_class")
     plan = plan_landing(initial_state_after_failure(airframe, 500 * FT, 75 * KT), airframe)

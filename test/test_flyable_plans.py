@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 import yaml
 
-from helireach_ros.core.airframe import ConfigError, load_airframe, parse_airframe
-from helireach_ros.core.flyability import COMMIT_CLIMB_TOLERANCE, check_flyability
-from helireach_ros.core.model import initial_state_after_failure, trim_controls
-from helireach_ros.core.planner import GROUND_AT_FAILURE, ROTOR_LIMIT_DURING_DELAY, get_planner
+from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe, parse_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure, trim_controls
+from helireach_ros.core.evidence.flyability import COMMIT_CLIMB_TOLERANCE, check_flyability
+from helireach_ros.core.ocp.transcription.base import terminal_cost
+from helireach_ros.core.planning.planner import GROUND_AT_FAILURE, ROTOR_LIMIT_DURING_DELAY, get_planner
 from helireach_ros.core.resources import config_path
-from helireach_ros.core.transcription.base import terminal_cost
 from helireach_ros.core.units import FT, KT
 
 # (height ft, speed kt) across the plane: the cases, the hover band, the knee, high and low speed

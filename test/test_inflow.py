@@ -10,12 +10,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from helireach_ros.core import inflow
-from helireach_ros.core.airframe import ConfigError, load_airframe, parse_airframe
-from helireach_ros.core.inflow import PAPER_ROTOR_MODEL, InflowModel, RotorModel
-from helireach_ros.core.model import dynamics_function, steady_autorotation, trim_level_flight
-from helireach_ros.core.planner import LandingPlanner
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.aircraft import inflow
+from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe, parse_airframe
+from helireach_ros.core.aircraft.inflow import PAPER_ROTOR_MODEL, InflowModel, RotorModel
+from helireach_ros.core.aircraft.model import dynamics_function, steady_autorotation, trim_level_flight
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import LandingPlanner
 from helireach_ros.core.units import FT, KT
 
 
@@ -228,7 +228,7 @@ def test_shipped_airframes_give_the_momentum_rotor_a_sourced_hub_height(name):
 def test_the_roots_as_inputs_give_the_closed_form_dynamics():
     """An NLP may carry the momentum roots as variables (model.implicit_inflow_functions): at the Newton roots the
     residuals vanish and the dynamics equal the closed form; off them the residuals do not."""
-    from helireach_ros.core.model import disturbed_dynamics_function, implicit_inflow_functions
+    from helireach_ros.core.aircraft.model import disturbed_dynamics_function, implicit_inflow_functions
 
     airframe = _momentum(load_airframe("oh58a_class"))
     dynamics, residuals, roots = implicit_inflow_functions(airframe)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from helireach_ros.core.input_contract import (
+from helireach_ros.core.policies.input_contract import (
     ACCEPTED,
     INVALID,
     OUT_OF_ORDER,
@@ -12,7 +12,7 @@ from helireach_ros.core.input_contract import (
     StampOrder,
     frame_problems,
 )
-from helireach_ros.core.qos_problems import INPUT, OUTPUT, QosProblemLog
+from helireach_ros.core.policies.qos_problems import INPUT, OUTPUT, QosProblemLog
 
 ODOM = FrameContract("odom", "base_stabilized")
 S = 1_000_000_000

@@ -20,8 +20,8 @@ from test_ros_nodes import OMEGA0, TIMEOUT_S, Harness, level_is
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+from helireach_ros.core.policies.vehicle_readings import OdometryReading
 from helireach_ros.core.units import FT, KT
-from helireach_ros.core.vehicle_readings import OdometryReading
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode, evaluate_safety
 from helireach_ros.ros.nodes.monitor import VehicleMonitor

@@ -1,4 +1,5 @@
-"""The planner node's failure-handling rules (core/landing_supervisor.py), without ROS: every branch of the fallback,
+"""The planner node's failure-handling rules (core/policies/landing_supervisor.py), without ROS: every branch of the
+fallback,
 deadline, timer and re-plan decisions, including the orders of events the chaos and fuzz tests found."""
 
 from __future__ import annotations
@@ -11,8 +12,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
-from helireach_ros.core.landing_supervisor import (
+from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
+from helireach_ros.core.policies.landing_supervisor import (
     CurrentPlan,
     EpisodeAction,
     LandingSupervisor,
@@ -27,7 +28,7 @@ from helireach_ros.core.landing_supervisor import (
 
 
 def test_the_rules_load_without_ros() -> None:
-    code = "import sys, helireach_ros.core.landing_supervisor; sys.exit('rclpy' in sys.modules)"
+    code = "import sys, helireach_ros.core.policies.landing_supervisor; sys.exit('rclpy' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
 
 

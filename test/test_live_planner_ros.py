@@ -19,7 +19,7 @@ from std_msgs.msg import Bool
 from test_ros_nodes import Harness, monitor_and_planner
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.planner import plan_landing
+from helireach_ros.core.planning.planner import plan_landing
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, failure_now_state
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner, plan_landing
+from helireach_ros.core.planning.planner import get_planner, plan_landing
+from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, failure_now_state
 from helireach_ros.core.units import FT, KT
 
 FPM = FT / 60.0

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.model import (
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import (
     dynamics_function,
     initial_state_after_failure,
     steady_autorotation,

@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.model import steady_autorotation
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import steady_autorotation
 from helireach_ros.core.units import FT, KT
 
 

@@ -1,4 +1,4 @@
-"""The planner's statuses (core/plan_status.py), without ROS: every key a report carries is documented in its
+"""The planner's statuses (core/policies/plan_status.py), without ROS: every key a report carries is documented in its
 msg_docs page, and the levels follow the never-optimistic rule (fallbacks, missing plans and unknown verdicts are
 never OK)."""
 
@@ -10,12 +10,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, plan_lateness
-from helireach_ros.core.fallback import fallback_plan
-from helireach_ros.core.live_reachability import LiveVerdict
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.plan_status import (
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.estimation.weight_tracking import WeightChoice
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.fallback import fallback_plan
+from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, plan_lateness
+from helireach_ros.core.policies.live_reachability import LiveVerdict
+from helireach_ros.core.policies.plan_status import (
     PlannerIdentity,
     StatusReport,
     episode_end_report,
@@ -24,9 +26,7 @@ from helireach_ros.core.plan_status import (
     no_plan_report,
     robust_report,
 )
-from helireach_ros.core.settings import load_settings
 from helireach_ros.core.units import FT, KT
-from helireach_ros.core.weight_tracking import WeightChoice
 
 MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"
 S = 1_000_000_000

@@ -4,12 +4,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import ConfigError, load_airframe
-from helireach_ros.core.model import initial_state_after_failure, steady_autorotation
-from helireach_ros.core.planner import WarmStart, get_planner, plan_landing
-from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure, steady_autorotation
+from helireach_ros.core.evidence.replay import NOT_REPLAYED
+from helireach_ros.core.ocp.settings import PlannerSettings
+from helireach_ros.core.planning.planner import WarmStart, get_planner, plan_landing
 from helireach_ros.core.units import FT, KT
-from helireach_ros.core.verification import NOT_REPLAYED
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,5 @@
-"""The planner node's solvers without ROS (core/planner_backend.py): what it loads, and that a failure's solve or
+"""The planner node's solvers without ROS (core/workers/planner_backend.py): what it loads, and that a failure's solve
+or
 fallback answers with a plan or a reason, never an exception."""
 
 from __future__ import annotations
@@ -8,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner_backend import BackendSettings, PlannerBackend
-from helireach_ros.core.settings import load_settings
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.ocp.settings import load_settings
 from helireach_ros.core.units import FT, KT
+from helireach_ros.core.workers.planner_backend import BackendSettings, PlannerBackend
 
 
 @pytest.fixture(scope="module")

@@ -20,8 +20,8 @@ from helireach_ros.core.envelope.data import (
     save_envelope,
 )
 from helireach_ros.core.envelope.plot import plot_envelope
-from helireach_ros.core.envelope.robust import RobustEnvelopeJob, add_robust_verdicts
-from helireach_ros.core.uncertainty import parse_uncertainty_set
+from helireach_ros.core.flight.uncertainty import parse_uncertainty_set
+from helireach_ros.core.robustness.envelope_verdicts import RobustEnvelopeJob, add_robust_verdicts
 from helireach_ros.core.units import FT, KT
 
 pytestmark = [pytest.mark.slow]

@@ -13,19 +13,19 @@ import time
 import numpy as np
 import pytest
 
-from helireach_ros.core.background_verification import BackgroundRobustVerification
-from helireach_ros.core.closed_loop import ClosedLoopSettings
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.robust_verification import (
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.flight.simulation import Scenario, SimulatedVehicle
+from helireach_ros.core.flight.uncertainty import PerturbedModel, UncertainRange, load_uncertainty_set
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.background import BackgroundRobustVerification
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings
+from helireach_ros.core.robustness.verification import (
     failure_state,
     model_vehicle,
     own_landing,
     verify_plan_robust,
     verify_robust,
 )
-from helireach_ros.core.simulation import Scenario, SimulatedVehicle
-from helireach_ros.core.uncertainty import PerturbedModel, UncertainRange, load_uncertainty_set
 from helireach_ros.core.units import FT, KT
 
 pytestmark = [pytest.mark.slow]

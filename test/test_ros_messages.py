@@ -12,19 +12,19 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
 from sensor_msgs.msg import JointState
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.data import StoredPlan
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import LandingPlanner
-from helireach_ros.core.settings import load_settings
-from helireach_ros.core.units import FT, KT
-from helireach_ros.core.vehicle_readings import (
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.planner import LandingPlanner
+from helireach_ros.core.policies.vehicle_readings import (
     OdometryReading,
     RotorReading,
     StateLimits,
     helicopter_state,
     state_problems,
 )
+from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 
 MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"

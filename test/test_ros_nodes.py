@@ -24,9 +24,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.airframe import load_airframe
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure, trim_controls
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-from helireach_ros.core.model import initial_state_after_failure, trim_controls
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.bringup import build_system
@@ -518,7 +518,7 @@ def test_an_implausible_airframe_is_a_warning_on_the_planners_diagnostics(contex
 
     import yaml
 
-    from helireach_ros.core.airframe_plausibility import AirframePlausibilityWarning
+    from helireach_ros.core.aircraft.plausibility import AirframePlausibilityWarning
     from helireach_ros.core.resources import config_path
 
     document = yaml.safe_load(config_path("airframes/uh60a_class.yaml").read_text())

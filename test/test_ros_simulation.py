@@ -7,16 +7,16 @@ import dataclasses
 import numpy as np
 import pytest
 
-from helireach_ros.core.airframe import ConfigError
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import plan_landing
-from helireach_ros.core.simulation import (
+from helireach_ros.core.aircraft.airframe import ConfigError
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.flight.simulation import (
     ControlSchedule,
     SimulatedVehicle,
     load_scenario,
     mismatched_airframe,
     piecewise_linear_controls,
 )
+from helireach_ros.core.planning.planner import plan_landing
 from helireach_ros.core.units import FT, KT
 
 SHIPPED_SCENARIOS = ("demo_500ft_75kt", "nominal_500ft_75kt", "low_hover_100ft")

@@ -27,8 +27,8 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros import __version__
 from helireach_ros.cli.demo import run_demo, summary
 from helireach_ros.cli.main import main as helireach_main
+from helireach_ros.core.flight.simulation import piecewise_linear_controls
 from helireach_ros.core.mcap_log import read_log, read_log_metadata
-from helireach_ros.core.simulation import piecewise_linear_controls
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.bringup import ros_arguments
 from helireach_ros.ros.executors import create_executor

@@ -6,12 +6,12 @@ import math
 
 import pytest
 
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.envelope.domain import DomainCheck, ValidityDomain
-from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.safety_status import (
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings
+from helireach_ros.core.policies.safety_status import (
     EnvelopeEvidence,
     LiveEvidence,
     PlanEvidence,

@@ -13,17 +13,23 @@ import time
 import numpy as np
 import pytest
 
+from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
-from helireach_ros.core.model import initial_state_after_failure
-from helireach_ros.core.planner import ControlFunctionWarmStart, LandingPlan, WarmStart, get_planner, plan_landing
-from helireach_ros.core.solver_pool import (
+from helireach_ros.core.planning.planner import (
+    ControlFunctionWarmStart,
+    LandingPlan,
+    WarmStart,
+    get_planner,
+    plan_landing,
+)
+from helireach_ros.core.units import FT, KT
+from helireach_ros.core.workers.solver_pool import (
     PRIORITY_FAILURE,
     PRIORITY_LIVE,
     SolverPool,
     SolverPoolSettings,
     SolverWorkerError,
 )
-from helireach_ros.core.units import FT, KT
 
 STATES_FT_KT = [(500, 75), (150, 0), (60, 100)]
 

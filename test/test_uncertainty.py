@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 import yaml
 
-from helireach_ros.core.airframe import ConfigError
-from helireach_ros.core.resources import config_path
-from helireach_ros.core.simulation import load_scenario
-from helireach_ros.core.uncertainty import (
+from helireach_ros.core.aircraft.airframe import ConfigError
+from helireach_ros.core.flight.simulation import load_scenario
+from helireach_ros.core.flight.uncertainty import (
     PerturbedModel,
     UncertainRange,
     load_uncertainty_set,
     resolution_iv_signs,
 )
+from helireach_ros.core.resources import config_path
 from helireach_ros.core.units import FT, KT
 
 

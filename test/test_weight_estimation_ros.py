@@ -22,22 +22,22 @@ from std_msgs.msg import Bool
 from test_ros_nodes import Harness, monitor_and_planner
 
 from helireach_ros.cli.demo import demo_ros_arguments
-from helireach_ros.core.airframe import load_airframe
-from helireach_ros.core.closed_loop import ClosedLoopSettings, fly_closed_loop
-from helireach_ros.core.mismatch_presets import apply_mismatch_preset
-from helireach_ros.core.model import initial_state_after_failure, trim_flight
-from helireach_ros.core.planner import get_planner
-from helireach_ros.core.simulation import SimulatedVehicle, load_scenario, mismatched_airframe
-from helireach_ros.core.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
-from helireach_ros.core.uncertainty import load_uncertainty_set
-from helireach_ros.core.units import FT, KT
-from helireach_ros.core.weight_tracking import (
+from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure, trim_flight
+from helireach_ros.core.estimation.weight_tracking import (
     WeightSample,
     WeightTracker,
     WeightTrackingSettings,
     plausible_band,
     quantised_weight,
 )
+from helireach_ros.core.flight.mismatch_presets import apply_mismatch_preset
+from helireach_ros.core.flight.simulation import SimulatedVehicle, load_scenario, mismatched_airframe
+from helireach_ros.core.flight.uncertainty import load_uncertainty_set
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
+from helireach_ros.core.units import FT, KT
+from helireach_ros.core.workers.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.nodes.sim_vehicle import SimVehicleNode
 from helireach_ros.ros.parameters import ParameterError

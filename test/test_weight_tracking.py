@@ -6,12 +6,8 @@ import math
 
 import pytest
 
-from helireach_ros.core.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset, mismatch_preset
-from helireach_ros.core.model import trim_flight
-from helireach_ros.core.simulation import load_scenario, mismatched_airframe
-from helireach_ros.core.uncertainty import load_uncertainty_set
-from helireach_ros.core.units import KT
-from helireach_ros.core.weight_tracking import (
+from helireach_ros.core.aircraft.model import trim_flight
+from helireach_ros.core.estimation.weight_tracking import (
     WeightChoice,
     WeightSample,
     WeightTracker,
@@ -20,6 +16,10 @@ from helireach_ros.core.weight_tracking import (
     quantised_weight,
     ready_choice,
 )
+from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset, mismatch_preset
+from helireach_ros.core.flight.simulation import load_scenario, mismatched_airframe
+from helireach_ros.core.flight.uncertainty import load_uncertainty_set
+from helireach_ros.core.units import KT
 
 PERIOD_NS = 40_000_000  # 25 Hz, as the simulated vehicle publishes
 SPEED = 75 * KT

@@ -12,7 +12,7 @@ Exits 0 only if the landing met the limits. ``--hold`` keeps the nodes running a
 (the cockpit display page, served by default, stays up with them) until Ctrl-C.
 
 ``--mismatch NAME`` flies a model-mismatch preset instead of the scenario's own
-(:mod:`helireach_ros.core.mismatch_presets`: ``none``, ``drag+5`` = the default scenario's, ``weight+5`` = an
+(:mod:`helireach_ros.core.flight.mismatch_presets`: ``none``, ``drag+5`` = the default scenario's, ``weight+5`` = an
 unknown 5 % heavier aircraft, ``weight-5``, ``heavy+draggy``, ``light+clean``). With a preset the planner estimates
 the gross weight before the failure (planner parameter ``estimate_weight``; off by default, so ``make demo`` is
 unchanged); ``--no-estimate-weight`` / ``--estimate-weight`` choose explicitly. The summary names the preset and the
@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from helireach_ros.core.mismatch_presets import MISMATCH_PRESET_NAMES
+from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
 __all__ = ["DemoResult", "demo_ros_arguments", "main", "register", "run_demo"]
@@ -53,8 +53,9 @@ class DemoResult:
         status_before_failure: the last safety verdict while cruising (level name, message) or None.
         status_during_descent: how often each (level, evidence) of the safety status was seen from the failure to
             the touchdown (sampled at every executor wake-up).
-        touchdown: the vehicle's :class:`~helireach_ros.core.simulation.TouchdownReport` (None on timeout).
-        first_plan: the first published plan record (:class:`~helireach_ros.core.failure_episode.PublishedPlan`)
+        touchdown: the vehicle's :class:`~helireach_ros.core.flight.simulation.TouchdownReport` (None on timeout).
+        first_plan: the first published plan record
+        (:class:`~helireach_ros.core.policies.failure_episode.PublishedPlan`)
             made after the failure (the standby plan is not it).
         standby_plan: the standby plan record (the live plan published on the failure), or None.
         plans: every plan published for the failure.
@@ -218,7 +219,7 @@ def _write_figures(out: Path, result: DemoResult, envelope: Any) -> list[Path]:
         written.append(plot_envelope(envelope, out / "hv_diagram.png", track=result.track, title_extra="flown track"))
     plan = result.first_plan.plan if result.first_plan is not None else None
     if plan is not None and hasattr(plan, "replay"):
-        from helireach_ros.core.plan_plot import plot_landing_plan
+        from helireach_ros.core.planning.plan_plot import plot_landing_plan
 
         written.append(plot_landing_plan(plan, out / "landing_plan.png"))
     return written

@@ -28,7 +28,7 @@ import sys
 from pathlib import Path
 
 from helireach_ros.cli.options import add_rotor_model_option
-from helireach_ros.core.settings import METHODS
+from helireach_ros.core.ocp.settings import METHODS
 
 __all__ = ["register"]
 
@@ -169,14 +169,14 @@ def _error(message: str) -> int:
 
 
 def _compute(arguments: argparse.Namespace) -> int:
-    from helireach_ros.core.airframe import ConfigError, load_airframe
+    from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
     from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelope
     from helireach_ros.core.envelope.data import STATUS_CODES, EnvelopeError, save_envelope
     from helireach_ros.core.envelope.grid import condition_file_name, parse_list, parse_range
     from helireach_ros.core.envelope.progress import Progress
-    from helireach_ros.core.envelope.robust import add_robust_verdicts
     from helireach_ros.core.envelope.workers import make_executor
-    from helireach_ros.core.settings import load_settings
+    from helireach_ros.core.ocp.settings import load_settings
+    from helireach_ros.core.robustness.envelope_verdicts import add_robust_verdicts
     from helireach_ros.core.units import FT, KT, LBF
 
     try:
@@ -273,8 +273,8 @@ def _robust_job_factory(arguments: argparse.Namespace):
     Raises:
         ConfigError, ValueError: an unreadable uncertainty set.
     """
-    from helireach_ros.core.envelope.robust import RobustEnvelopeJob
-    from helireach_ros.core.uncertainty import DEFAULT_UNCERTAINTY_FILE, load_uncertainty_set
+    from helireach_ros.core.flight.uncertainty import DEFAULT_UNCERTAINTY_FILE, load_uncertainty_set
+    from helireach_ros.core.robustness.envelope_verdicts import RobustEnvelopeJob
 
     uncertainty = load_uncertainty_set(arguments.uncertainty or DEFAULT_UNCERTAINTY_FILE)
 
@@ -301,12 +301,12 @@ def _print_robust(path: Path, envelope) -> None:
 
 def _robust(arguments: argparse.Namespace) -> int:
     """``envelope robust``: robust verdicts for an existing envelope."""
-    from helireach_ros.core.airframe import ConfigError, load_airframe
+    from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
     from helireach_ros.core.envelope.data import EnvelopeError, load_envelope, save_envelope
     from helireach_ros.core.envelope.progress import Progress
-    from helireach_ros.core.envelope.robust import add_robust_verdicts
     from helireach_ros.core.envelope.workers import make_executor
-    from helireach_ros.core.settings import load_settings
+    from helireach_ros.core.ocp.settings import load_settings
+    from helireach_ros.core.robustness.envelope_verdicts import add_robust_verdicts
 
     try:
         airframe = load_airframe(arguments.airframe)
@@ -376,7 +376,7 @@ def _query(arguments: argparse.Namespace) -> int:
     try:
         airframe = None
         if arguments.airframe:
-            from helireach_ros.core.airframe import ConfigError, load_airframe
+            from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
 
             try:
                 airframe = load_airframe(arguments.airframe)

@@ -2,7 +2,7 @@
 
 What ``make nlp-cache`` runs: for each airframe (default ``uh60a_class``) with the planner settings file, the NLP's
 CasADi functions are generated as C, compiled and stored under their checksum
-(:mod:`helireach_ros.core.compiled_nlp`), and so is IPOPT's linear solver (:mod:`helireach_ros.core.block_ldl`).
+(:mod:`helireach_ros.core.ocp.compiled_nlp`), and so is IPOPT's linear solver (:mod:`helireach_ros.core.ocp.block_ldl`).
 Later planners of the same NLP load them; without them the planner runs the plain functions, never an error.
 Exit codes: 0 built (or already there), 2 bad input (an unknown airframe or a broken settings file).
 """
@@ -17,10 +17,10 @@ __all__ = ["main", "register"]
 
 
 def _build(arguments: argparse.Namespace) -> int:
-    from helireach_ros.core.airframe import ConfigError, load_airframe
-    from helireach_ros.core.compiled_nlp import CodegenSettings
-    from helireach_ros.core.planner import LandingPlanner
-    from helireach_ros.core.settings import load_settings
+    from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
+    from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
+    from helireach_ros.core.ocp.settings import load_settings
+    from helireach_ros.core.planning.planner import LandingPlanner
 
     codegen = dataclasses.replace(CodegenSettings.from_environment(), mode="build")
     try:

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import argparse
 
-from helireach_ros.core.airframe import ROTOR_MODEL_CHOICES
+from helireach_ros.core.aircraft.airframe import ROTOR_MODEL_CHOICES
 
 __all__ = ["add_rotor_model_option"]
 
 
 def add_rotor_model_option(parser: argparse.ArgumentParser) -> None:
     """``--rotor-model airframe|paper|momentum``, for
-    :meth:`~helireach_ros.core.airframe.Airframe.with_rotor_model_choice`."""
+    :meth:`~helireach_ros.core.aircraft.airframe.Airframe.with_rotor_model_choice`."""
     parser.add_argument(
         "--rotor-model",
         choices=ROTOR_MODEL_CHOICES,

@@ -67,9 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run_plan(arguments: argparse.Namespace) -> int:
     """Handler of ``helireach plan``; returns 0 if safe, 1 if not, 2 on bad input."""
-    from helireach_ros.core.airframe import ConfigError, load_airframe
-    from helireach_ros.core.planner import plan_landing
-    from helireach_ros.core.settings import load_settings
+    from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
+    from helireach_ros.core.ocp.settings import load_settings
+    from helireach_ros.core.planning.planner import plan_landing
     from helireach_ros.core.units import FT, KT, LBF
 
     try:
@@ -87,7 +87,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
         return 2
 
     if arguments.plot:
-        from helireach_ros.core.plan_plot import plot_landing_plan
+        from helireach_ros.core.planning.plan_plot import plot_landing_plan
 
         plot_landing_plan(plan, arguments.plot)
     if arguments.json:
@@ -134,7 +134,7 @@ def _flyability_line(plan) -> str:
 
 def _state(arguments: argparse.Namespace, airframe):
     """The state at the failure from the options (see the module docstring)."""
-    from helireach_ros.core.model import HelicopterState, initial_state_after_failure
+    from helireach_ros.core.aircraft.model import HelicopterState, initial_state_after_failure
     from helireach_ros.core.units import FT, KT
 
     if arguments.state_json is not None:

@@ -1,6 +1,6 @@
 """Dataclasses of numpy arrays as bytes, and back, without pickle.
 
-The solver process (:mod:`helireach_ros.core.solver_pool`) sends landing plans and requests over a pipe.
+The solver process (:mod:`helireach_ros.core.workers.solver_pool`) sends landing plans and requests over a pipe.
 Pickle would execute whatever a corrupted or foreign byte stream says; this codec writes a JSON header
 (name, dtype, shape of each array) followed by the arrays' raw bytes, and refuses object dtypes, so the
 bytes can only ever become numeric, boolean or text arrays, and the arrays only the dataclass the reader

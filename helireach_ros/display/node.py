@@ -10,7 +10,7 @@ times per second and at least every ``heartbeat`` (so a page can tell a silent s
 is queued per message: a 60 Hz (or 6 kHz) state stream costs each page at most one frame per send interval, the
 rest are dropped, and a page that cannot keep up only slows its own sender.
 
-The banner follows the flight phase (:mod:`helireach_ros.core.flight_phase`): in NORMAL it is
+The banner follows the flight phase (:mod:`helireach_ros.core.policies.flight_phase`): in NORMAL it is
 ``/helireach/safety_status`` (OK → SAFE, WARN → CAUTION, ERROR → AVOID, STALE or unknown → NO DATA); in
 AUTOROTATION the plan; LANDED the touchdown result (``/helireach/touchdown``, else from the state); ENDED the
 recovery; STALE when a streaming source (state, rotor, safety status, failure episode) is silent longer than
@@ -49,7 +49,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.flight_phase import (
+from helireach_ros.core.policies.flight_phase import (
     CueEvent,
     PhaseInputs,
     PlanVerdictInput,
@@ -280,7 +280,7 @@ class CockpitDisplay(Node):
         touchdown limits and the thrust scale (from the airframe file)."""
         rotor_limits, airframe_label, airframe = None, str(envelope_data.get("airframe", "")), None
         try:
-            from helireach_ros.core.airframe import load_airframe
+            from helireach_ros.core.aircraft.airframe import load_airframe
 
             if self._airframe_name:
                 airframe = load_airframe(self._airframe_name)
@@ -326,7 +326,7 @@ class CockpitDisplay(Node):
         weight, density_altitude = status.get("gross_weight_n"), status.get("density_altitude_m")
         if self._airframe is None or weight is None or density_altitude is None:
             return None
-        from helireach_ros.core.airframe import isa_density
+        from helireach_ros.core.aircraft.airframe import isa_density
 
         airframe = self._airframe
         return thrust_scale(

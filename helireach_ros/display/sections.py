@@ -17,7 +17,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from nav_msgs.msg import Path as PathMsg
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.failure_episode import EpisodeState
+from helireach_ros.core.policies.failure_episode import EpisodeState
 from helireach_ros.core.status_values import parse_bool
 from helireach_ros.ros import messages as rm
 
@@ -193,7 +193,7 @@ def rotor_limits_section(airframe: Any = None, metadata: Mapping[str, Any] | Non
     """Rotor speed limits Ω₀, Ω_min = r_min Ω₀, Ω_max = r_max Ω₀ (rad/s) from an Airframe or envelope metadata.
 
     Args:
-        airframe: an :class:`helireach_ros.core.airframe.Airframe` (wins if given).
+        airframe: an :class:`helireach_ros.core.aircraft.airframe.Airframe` (wins if given).
         metadata: an envelope's metadata; its ``airframe`` entry is ``Airframe.as_dict()``.
 
     Returns:

@@ -26,7 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 
-from helireach_ros.core.vehicle_readings import StateLimits
+from helireach_ros.core.policies.vehicle_readings import StateLimits
 from helireach_ros.ros import messages as rm
 
 __all__ = [

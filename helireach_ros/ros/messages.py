@@ -12,7 +12,7 @@ Conventions (REP-103, SI on the wire; see ``msg_docs/`` for each topic):
 * ``trajectory_msgs/JointTrajectory`` of the landing: joints ``collective_thrust_coefficient`` (C_T)
   and ``pitch_angle`` (θ, rad), ``time_from_start`` from the plan's initial state, whose stamp is the
   header stamp. Zero-order-hold controls are encoded exactly with two points per interval
-  (:func:`~helireach_ros.core.simulation.piecewise_linear_controls`): linear interpolation between the
+  (:func:`~helireach_ros.core.flight.simulation.piecewise_linear_controls`): linear interpolation between the
   points reproduces the plan.
 * ``diagnostic_msgs/DiagnosticStatus``: ``values`` are strings; numbers in SI with the unit in the
   key (``height_m``), written with :func:`format_value` (round-trip precision).
@@ -37,9 +37,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from helireach_ros.core.simulation import piecewise_linear_controls
+from helireach_ros.core.flight.simulation import piecewise_linear_controls
+from helireach_ros.core.policies.vehicle_readings import OdometryReading, RotorReading
 from helireach_ros.core.status_values import format_value
-from helireach_ros.core.vehicle_readings import OdometryReading, RotorReading
 
 __all__ = [
     "COLLECTIVE_JOINT",
@@ -303,7 +303,7 @@ def trajectory_message(plan: Any, stamp_ns: int, frame_id: str = DEFAULT_BODY_FR
 
     Args:
         plan: anything with ``control_times``, ``control_values``, ``control_interpolation``
-            (a :class:`~helireach_ros.core.planner.LandingPlan` or an envelope's stored plan).
+            (a :class:`~helireach_ros.core.planning.planner.LandingPlan` or an envelope's stored plan).
         stamp_ns: the stamp of the state the plan starts from.
         frame_id: the vehicle frame the pitch angle refers to.
     """

@@ -272,7 +272,7 @@ def declare_aircraft(node: Node) -> Callable[[], Any]:
     ``-p gross_weight:=…`` sets them for every node, and the plans and the status describe the same aircraft.
 
     Returns:
-        A function loading that :class:`~helireach_ros.core.airframe.Airframe` (raises ``ConfigError`` on a bad
+        A function loading that :class:`~helireach_ros.core.aircraft.airframe.Airframe` (raises ``ConfigError`` on a bad
         file or out-of-range conditions), so each node decides what a broken configuration means for it.
     """
     declare = partial(declare_checked_parameter, node)
@@ -283,7 +283,7 @@ def declare_aircraft(node: Node) -> Callable[[], Any]:
     )
 
     def load() -> Any:
-        from helireach_ros.core.airframe import load_airframe
+        from helireach_ros.core.aircraft.airframe import load_airframe
 
         return load_airframe(name).with_conditions(
             gross_weight or None, None if math.isnan(density_altitude) else density_altitude

@@ -135,11 +135,11 @@ def compare_logged_plans(
     Raises:
         McapLogError: unreadable log. ValueError: the log holds no plan or lacks its metadata.
     """
-    from helireach_ros.core.airframe import load_airframe
+    from helireach_ros.core.aircraft.airframe import load_airframe
     from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
-    from helireach_ros.core.planner import get_planner
-    from helireach_ros.core.settings import PlannerSettings
-    from helireach_ros.core.simulation import piecewise_linear_controls
+    from helireach_ros.core.flight.simulation import piecewise_linear_controls
+    from helireach_ros.core.ocp.settings import PlannerSettings
+    from helireach_ros.core.planning.planner import get_planner
     from helireach_ros.ros import messages as rm
 
     pairs, metadata = _logged_plans(Path(path))

@@ -4,7 +4,7 @@ Every helireach node creates its input subscriptions (and the outputs it owns) t
 :class:`QosWatch`, which registers only the ``incompatible_qos`` event callback (not rclpy's default set:
 each event handler is a waitable the executor polls, see ``NO_QOS_EVENTS_SUBSCRIPTION``). An event is
 logged as an ERROR at once and published as the status ``<node>: QoS`` on ``/diagnostics``
-(:mod:`helireach_ros.core.qos_problems` says when a problem ends); the status goes out every period,
+(:mod:`helireach_ros.core.policies.qos_problems` says when a problem ends); the status goes out every period,
 OK when there is no problem, so its absence is visible too.
 
 What can still be incompatible once inputs subscribe BEST_EFFORT, VOLATILE (``SENSOR_QOS``)? Nothing on the
@@ -28,7 +28,7 @@ from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallba
 from rclpy.node import Node
 from rclpy.qos import QoSCompatibility, QoSPolicyKind, QoSProfile, qos_check_compatible
 
-from helireach_ros.core.qos_problems import INPUT, OUTPUT, QosProblemLog
+from helireach_ros.core.policies.qos_problems import INPUT, OUTPUT, QosProblemLog
 from helireach_ros.ros import messages as rm
 
 __all__ = ["QOS_STATUS_SUFFIX", "QosWatch", "drop_parameter_event_handlers", "input_problems_of"]

@@ -1,7 +1,7 @@
 """Computing H-V envelopes: one verified landing plan per grid node, in parallel or on Dask.
 
 For every node (h, V) of a height × speed grid, the helicopter flies level at trim when the
-engine fails (:func:`~helireach_ros.core.model.initial_state_after_failure`); the planner decides
+engine fails (:func:`~helireach_ros.core.aircraft.model.initial_state_after_failure`); the planner decides
 whether a safe landing is reachable from there. The work runs in three phases:
 
 1. **Sweep.** One task per speed column, heights ascending. The first node is solved cold; each
@@ -62,7 +62,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from helireach_ros import __version__
-from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION_ANSWERS,
@@ -78,7 +78,7 @@ from helireach_ros.core.envelope.data import (
 from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.envelope.progress import NullProgress, Progress
 from helireach_ros.core.envelope.workers import SerialExecutor
-from helireach_ros.core.settings import PlannerSettings
+from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.units import FT, KT
 
 __all__ = [
@@ -92,7 +92,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:
-    from helireach_ros.core.compiled_nlp import CodegenSettings
+    from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
 
 log = logging.getLogger(__name__)
 
@@ -238,7 +238,7 @@ def _checked(warm: _Solution, cold: _Solution) -> _Solution:
 
 def _warm_start_of(solution: _Solution):
     """The planner warm start stored in a solution (float32 → float64), or None without a plan."""
-    from helireach_ros.core.planner import WarmStart
+    from helireach_ros.core.planning.planner import WarmStart
 
     if solution.primal is None or solution.status in (_FAILED, _NO_TRIM):
         return None
@@ -258,9 +258,9 @@ def _solve_point(job: EnvelopeJob, height: float, speed: float, warm_start=None)
     solver errors become ``failed``. A safe plan is replayed again as the file stores it (its control function in
     float32); if that does not land within limits the node is ``unverified``, so every safe node's stored plan lands.
     """
-    from helireach_ros.core.model import initial_state_after_failure
-    from helireach_ros.core.planner import DECIDED_WITHOUT_NLP, get_planner
-    from helireach_ros.core.verification import replay_controls
+    from helireach_ros.core.aircraft.model import initial_state_after_failure
+    from helireach_ros.core.evidence.replay import replay_controls
+    from helireach_ros.core.planning.planner import DECIDED_WITHOUT_NLP, get_planner
 
     started, started_cpu = time.perf_counter(), time.process_time()
     try:
@@ -689,7 +689,7 @@ def _plan_sizes(solutions: Iterable[_Solution]) -> dict[str, tuple[int, ...]]:
 def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, str] | None) -> dict[str, Any]:
     import casadi
 
-    from helireach_ros.core.compiled_nlp import CodegenSettings
+    from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
 
     airframe = job.airframe.as_dict() | {"digest": job.airframe.digest()}
     grid = dict(grid_spec or {}, heights_count=len(job.heights), speeds_count=len(job.speeds))

@@ -19,7 +19,7 @@ File format (``.npz``, one file per envelope, self-describing):
 Per-node plans (format version 3) are stored as the node's state at the failure (``plan_initial_state``, float64)
 and the plan's control function (breakpoints and values, float32: what a fallback flies, never a safety claim),
 enough to warm-start the planner, which flies the function from that state to rebuild the NLP's
-primal point (:class:`~helireach_ros.core.planner.ControlFunctionWarmStart`). IPOPT's solution itself (the
+primal point (:class:`~helireach_ros.core.planning.planner.ControlFunctionWarmStart`). IPOPT's solution itself (the
 *solver state*: primal and both multiplier vectors, float32, :data:`SOLVER_STATE_ARRAYS`) is 90 % of the bytes
 and changes whenever the NLP does, so a complete file leaves it out: :func:`save_envelope` writes it to the user
 cache (:func:`solver_state_path`, keyed by the answers' checksum) and :func:`read_envelope_file` attaches it when
@@ -30,7 +30,7 @@ it is there (a faster warm start; docs/decisions/warm-start-storage.md). A parti
 and every per-node array has a leading climb axis (C × H × S); the boundary points carry the index of
 their slice (``boundary_slice``; refinement is within a slice). Each slice is the 2-D envelope of the
 states trimmed on that flight path. A node whose (speed, climb rate) has no steady powered flight
-(:func:`~helireach_ros.core.model.trim_flight` refuses it, e.g. a descent faster than the fuselage's terminal
+(:func:`~helireach_ros.core.aircraft.model.trim_flight` refuses it, e.g. a descent faster than the fuselage's terminal
 descent) is stored as ``no_trim``: no state to start from, never safe. 2-D files (format version 1) are
 read unchanged; a 2-D envelope is a 3-D one with one slice at level flight.
 
@@ -47,7 +47,7 @@ is the union of both slices' (a node of the plane is safe only if it is safe in 
 the 2-D margin of the combined slice. The margin does not measure along the climb axis. The refined
 boundary points are reported and plotted, but never used to call a state safe.
 
-**Robust verdicts** (optional arrays, :mod:`helireach_ros.core.envelope.robust`): ``robust_code`` per node
+**Robust verdicts** (optional arrays, :mod:`helireach_ros.core.robustness.envelope_verdicts`): ``robust_code`` per node
 (:data:`ROBUST_CODES`) says whether a nominally safe node's landing also holds, closed loop, in every model of a
 design of the uncertainty set. ``query(..., verdict="robust")`` answers by the same node rule with a safe node
 that is not robust counted as ``not_robust`` (between ``safe`` and ``unverified`` in conservatism), and its
@@ -78,9 +78,9 @@ from helireach_ros.core.resources import data_path, source_root
 from helireach_ros.core.units import FT, KT
 
 if TYPE_CHECKING:
-    from helireach_ros.core.airframe import Airframe
-    from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart
-    from helireach_ros.core.settings import PlannerSettings
+    from helireach_ros.core.aircraft.airframe import Airframe
+    from helireach_ros.core.ocp.settings import PlannerSettings
+    from helireach_ros.core.planning.planner import ControlFunctionWarmStart, WarmStart
 
 __all__ = [
     "DEFAULT_ENVELOPE",
@@ -230,7 +230,7 @@ class StoredPlan:
         warm_start: for the planner of the envelope's airframe and settings: the NLP solution where the solver
             state is known (:attr:`Envelope.solver_state`), else the control function flown from the node's state.
         control_times, control_values, control_interpolation: the control function
-            (see :class:`~helireach_ros.core.transcription.base.DecodedPlan`).
+            (see :class:`~helireach_ros.core.ocp.transcription.base.DecodedPlan`).
     """
 
     height: float
@@ -247,7 +247,7 @@ class StoredPlan:
 
     def controls_at(self, times) -> np.ndarray:
         """The planned (C_T, θ) at the given times, 2 × len(times) (held constant outside the plan)."""
-        from helireach_ros.core.verification import control_function
+        from helireach_ros.core.evidence.replay import control_function
 
         return control_function(self.control_times, self.control_values, self.control_interpolation, times)
 
@@ -703,7 +703,7 @@ class Envelope:
 
     def stored_plan(self, row: int, column: int, climb_index: int = 0) -> StoredPlan:
         """The plan stored at grid node (row, column) [of climb slice ``climb_index``], as float64."""
-        from helireach_ros.core.planner import ControlFunctionWarmStart, WarmStart
+        from helireach_ros.core.planning.planner import ControlFunctionWarmStart, WarmStart
 
         node = (climb_index, row, column) if self.is_3d else (row, column)
         arrays = self._arrays
@@ -815,7 +815,7 @@ def settings_differences(stored: dict[str, Any], settings: PlannerSettings) -> l
     A field the stored settings predate counts as its default: a setting is added with the behaviour before it as
     its default, so a file computed before it exists was computed with that default.
     """
-    from helireach_ros.core.settings import PlannerSettings
+    from helireach_ros.core.ocp.settings import PlannerSettings
 
     given, defaults = dataclasses.asdict(settings), dataclasses.asdict(PlannerSettings())
     return [

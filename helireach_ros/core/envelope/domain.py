@@ -1,7 +1,7 @@
 """Where an envelope's answer holds: its validity domain.
 
 A (2-D) H-V envelope is computed from *level trim at nominal rotor speed*: each node's landing starts from
-y = 0 and Ω = Ω₀ (:func:`~helireach_ros.core.model.initial_state_after_failure`). Its answer speaks for the
+y = 0 and Ω = Ω₀ (:func:`~helireach_ros.core.aircraft.model.initial_state_after_failure`). Its answer speaks for the
 aircraft only while the aircraft is in such a state, within tolerances:
 
 - **climb rate** within ±``climb_rate_tolerance`` of level flight (default 0.5 m/s ≈ 100 ft/min, *assumed*:

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from helireach_ros.core.airframe import Airframe
+from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.units import FT, LBF
 
 __all__ = ["condition_file_name", "parse_list", "parse_range"]

@@ -9,7 +9,8 @@ is bounded by the cell's not-safe corners and the refined boundary points on its
 squares; an ambiguous saddle cell is shaded through its middle, the conservative choice). The
 refined boundary is drawn as a curve through those points. Unverified and failed nodes get their
 own markers. An optional flown track (height m, speed m/s) is drawn on top. An envelope with robust verdicts
-(:mod:`helireach_ros.core.envelope.robust`) also gets its **robust boundary**: the edge of the set not proven
+(:mod:`helireach_ros.core.robustness.envelope_verdicts`) also gets its **robust boundary**: the edge of the set not
+proven
 robustly safe (cells with a corner that is not robust), dashed, and markers on the safe nodes that are not robust.
 """
 

@@ -57,7 +57,7 @@ class _ProcessExecutor:
 
     def __init__(self, workers: int) -> None:
         context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(["helireach_ros.core.envelope.compute", "helireach_ros.core.planner"])
+        context.set_forkserver_preload(["helireach_ros.core.envelope.compute", "helireach_ros.core.planning.planner"])
         self.workers = workers
         self.description = f"{workers} local worker processes"
         self._pool = concurrent.futures.ProcessPoolExecutor(workers, mp_context=context, initializer=_ignore_interrupts)

@@ -26,7 +26,7 @@ _CONDITION_KEYS = ("gross_weight_n", "density_altitude_m")
 
 
 def aircraft_metadata(airframe: Any, settings: Any) -> dict[str, str]:
-    """Metadata describing an :class:`~helireach_ros.core.airframe.Airframe` and ``PlannerSettings``."""
+    """Metadata describing an :class:`~helireach_ros.core.aircraft.airframe.Airframe` and ``PlannerSettings``."""
     return {
         "airframe": airframe.name,
         "airframe_digest": airframe.digest(),

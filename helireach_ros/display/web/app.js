@@ -138,7 +138,7 @@
   }
 
   // ---- banner and readouts (DOM) -----------------------------------------------------------------------
-  // The server decides the phase and its banner (helireach_ros/core/flight_phase.py); the page only adds its own
+  // The server decides the phase and its banner (helireach_ros/core/policies/flight_phase.py); the page only adds its own
   // link check: a lost or quiet link is STALE whatever the last frame said.
   function bannerState() {
     const now = performance.now();

@@ -1,7 +1,7 @@
 """Envelope status node: the published safety status, never wider than its evidence.
 
 Translates what arrives into evidence and publishes the decision of
-:func:`helireach_ros.core.safety_status.assess_safety` (the module has the rules; no policy lives here) on
+:func:`helireach_ros.core.policies.safety_status.assess_safety` (the module has the rules; no policy lives here) on
 ``/helireach/safety_status`` (``diagnostic_msgs/DiagnosticStatus``, latched)
 when the verdict changes and every ``publish_period``. The evidence:
 
@@ -54,8 +54,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 
 from helireach_ros.core.envelope.data import VERDICTS
-from helireach_ros.core.failure_episode import EpisodeState
-from helireach_ros.core.safety_status import (
+from helireach_ros.core.policies.failure_episode import EpisodeState
+from helireach_ros.core.policies.safety_status import (
     LIVE_WARN_VALUE,
     LiveEvidence,
     PlanEvidence,
@@ -63,7 +63,7 @@ from helireach_ros.core.safety_status import (
     live_evidence,
     plan_evidence,
 )
-from helireach_ros.core.vehicle_readings import OdometryReading, StateLimits, state_problems
+from helireach_ros.core.policies.vehicle_readings import OdometryReading, StateLimits, state_problems
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
 from helireach_ros.ros.parameters import ParameterError, declare_aircraft, declare_checked_parameter
@@ -82,7 +82,8 @@ class SafetyVerdict:
 
 
 def evaluate_safety(*args: Any, **kwargs: Any) -> SafetyVerdict:
-    """The safety status of a state (:func:`helireach_ros.core.safety_status.assess_safety`, same arguments) with its
+    """The safety status of a state (:func:`helireach_ros.core.policies.safety_status.assess_safety`, same arguments)
+    with its
     level as the ``DiagnosticStatus`` constant."""
     assessment = assess_safety(*args, **kwargs)
     return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[assessment.level], assessment.message, assessment.values)

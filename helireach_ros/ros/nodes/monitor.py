@@ -4,10 +4,11 @@ Subscribes the vehicle state (``/vehicle/odometry``, ``/vehicle/rotor``) and the
 (``/vehicle/engine_failure``). Every state message is checked — finite, within the plausible ranges
 (parameters), stamp neither older than ``max_message_age`` nor in the future, odometry frames the
 expected ``world_frame``/``body_frame``, stamp newer than the latest accepted one of its input (else dropped:
-:mod:`helireach_ros.core.input_contract`) — and only valid ones are republished unchanged as the canonical
+:mod:`helireach_ros.core.policies.input_contract`) — and only valid ones are republished unchanged as the canonical
 state (``/helireach/state``, ``/helireach/rotor_state``).
 The failure flag and the valid state drive the failure-episode model
-(:class:`~helireach_ros.core.failure_episode.EpisodeTracker`): each episode start is published once as a failure
+(:class:`~helireach_ros.core.policies.failure_episode.EpisodeTracker`): each episode start is published once as a
+failure
 event (``/helireach/failure_event``, ``std_msgs/Header`` stamped with the episode's first true), its state on
 ``/helireach/failure_episode`` (on change and every ``diagnostics_period``); until a flag arrives the
 diagnostics WARN "no engine-failure flag received". Rejected input is counted, logged
@@ -31,15 +32,15 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 
-from helireach_ros.core.failure_episode import (
+from helireach_ros.core.policies.failure_episode import (
     EpisodePhase,
     EpisodeSettings,
     EpisodeState,
     EpisodeTracker,
     EpisodeTransition,
 )
-from helireach_ros.core.input_contract import OUT_OF_ORDER, WRONG_FRAME, FrameContract, InputGate
-from helireach_ros.core.vehicle_readings import StateLimits, state_problems
+from helireach_ros.core.policies.input_contract import OUT_OF_ORDER, WRONG_FRAME, FrameContract, InputGate
+from helireach_ros.core.policies.vehicle_readings import StateLimits, state_problems
 from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
@@ -122,9 +123,9 @@ class VehicleMonitor(Node):
         self._last_valid_odometry_ns: int | None = None
         self._last_valid_rotor_ns: int | None = None
         self._last_rejection: tuple[int, str] | None = None
-        self._episodes = EpisodeTracker(self._episode_settings)  # the failure-episode model (core.failure_episode)
+        self._episodes = EpisodeTracker(self._episode_settings)  # the failure-episode model
         self._vehicle_frame = rm.DEFAULT_BODY_FRAME
-        # The input contract (core.input_contract): frames, then values, then stamp order, per stamped input.
+        # The input contract (core.policies.input_contract): frames, then values, then stamp order, per stamped input.
         self._gates = {"odometry": InputGate(FrameContract(world_frame, body_frame)), "rotor": InputGate()}
         self._last_drop: tuple[int, str] | None = None
         self._recent_flags: deque[tuple[int, bool]] = deque(maxlen=_RECENT_FLAGS)  # (received ns, value)

@@ -1,9 +1,11 @@
 """Planner node: on an engine failure, plan the landing, publish it, and keep re-planning down to the ground.
 
 The node translates: ROS inputs to core calls, their answers to messages. The failure handling is
-:class:`~helireach_ros.core.landing_supervisor.LandingSupervisor`, the statuses are
-:mod:`helireach_ros.core.plan_status`, solves run in a :class:`~helireach_ros.core.solver_pool.SolverPool` (or on the
-node's solver thread), live verdicts come from :class:`~helireach_ros.core.live_reachability.LiveEvaluator`. What it
+:class:`~helireach_ros.core.policies.landing_supervisor.LandingSupervisor`, the statuses are
+:mod:`helireach_ros.core.policies.plan_status`, solves run in a
+:class:`~helireach_ros.core.workers.solver_pool.SolverPool` (or on the
+node's solver thread), live verdicts come from :class:`~helireach_ros.core.policies.live_reachability.LiveEvaluator`.
+What it
 does, parameter by parameter: docs/guides/planner-node.md.
 
 Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
@@ -28,19 +30,20 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.disturbance import DisturbanceSettings, DisturbanceTracker
-from helireach_ros.core.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
-from helireach_ros.core.fallback import FallbackPlan
-from helireach_ros.core.landing_supervisor import (
+from helireach_ros.core.aircraft.model import clip_rotor_speed_noise
+from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker
+from helireach_ros.core.estimation.weight_tracking import WeightChoice, WeightSample, ready_choice
+from helireach_ros.core.planning.fallback import FallbackPlan
+from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
+from helireach_ros.core.policies.landing_supervisor import (
     EpisodeAction,
     LandingSupervisor,
     ReplanGate,
     SupervisorSettings,
     TimerAction,
 )
-from helireach_ros.core.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
-from helireach_ros.core.model import clip_rotor_speed_noise
-from helireach_ros.core.plan_status import (
+from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
+from helireach_ros.core.policies.plan_status import (
     PlannerHealth,
     PlannerIdentity,
     SolverPoolHealth,
@@ -53,15 +56,14 @@ from helireach_ros.core.plan_status import (
     planner_health_report,
     robust_report,
 )
-from helireach_ros.core.planner_backend import BackendSettings, PlannerBackend
-from helireach_ros.core.vehicle_readings import (
+from helireach_ros.core.policies.vehicle_readings import (
     OdometryReading,
     RotorReading,
     StateLimits,
     helicopter_state,
     state_problems,
 )
-from helireach_ros.core.weight_tracking import WeightChoice, WeightSample, ready_choice
+from helireach_ros.core.workers.planner_backend import BackendSettings, PlannerBackend
 from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
@@ -148,7 +150,7 @@ class LandingPlannerNode(Node):
             robust_uncertainty=self.config.robust_uncertainty,
         )
         try:
-            from helireach_ros.core.settings import load_settings
+            from helireach_ros.core.ocp.settings import load_settings
 
             self._start_backend(load_aircraft(), load_settings(config.planner_settings or None), backend)
         except Exception as error:  # a broken airframe/settings file: say so on every channel, keep running
@@ -217,7 +219,7 @@ class LandingPlannerNode(Node):
 
     def _replanning_policy(self) -> Any:
         """This node's re-planning policy as the closed loop flies it (what the robust verification checks)."""
-        from helireach_ros.core.closed_loop import ClosedLoopSettings
+        from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings
 
         return ClosedLoopSettings(
             replan_period=self.config.replan_period if self.config.replan_period > 0.0 else _NO_REPLANNING_PERIOD_S,
@@ -619,7 +621,8 @@ class LandingPlannerNode(Node):
 
     # -- fallbacks -----------------------------------------------------------------------------------------------
     def fallback_plan(self, state: np.ndarray) -> FallbackPlan:
-        """The best available controls without a converged solve (:func:`helireach_ros.core.fallback.fallback_plan`)."""
+        """The best available controls without a converged solve
+        (:func:`helireach_ros.core.planning.fallback.fallback_plan`)."""
         if self._backend is None:
             raise RuntimeError(f"planner not configured ({self._setup_error})")
         return self._backend.fallback_plan(state)

@@ -267,7 +267,7 @@ class McapRecorder(Node):
 
     def _own_metadata(self, load_aircraft: Any, settings_file: str) -> dict[str, str]:
         """What this recorder knows by itself: software, command, aircraft and planner settings from its parameters."""
-        from helireach_ros.core.settings import load_settings
+        from helireach_ros.core.ocp.settings import load_settings
 
         values = {"software_version": __version__, "command": " ".join(sys.argv) or "helireach_recorder"}
         try:

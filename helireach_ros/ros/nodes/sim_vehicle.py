@@ -1,15 +1,15 @@
 """Simulated vehicle node: the helicopter the helireach nodes fly in tests, the demo and at a desk.
 
-Flies a scenario (:func:`~helireach_ros.core.simulation.load_scenario`: level trim at a height and speed,
+Flies a scenario (:func:`~helireach_ros.core.flight.simulation.load_scenario`: level trim at a height and speed,
 engine failure at a time, parameter mismatch, seeded sensor noise) with
-:class:`~helireach_ros.core.simulation.SimulatedVehicle` in real time, and publishes what a real
+:class:`~helireach_ros.core.flight.simulation.SimulatedVehicle` in real time, and publishes what a real
 vehicle would: ``/vehicle/odometry``, ``/vehicle/rotor`` and ``/vehicle/engine_failure`` every
 ``publish_period``. After the failure it follows the latest ``/helireach/landing_trajectory``
 (holding the trim controls until the first arrives; the trajectory's header stamp is its time 0).
 At touchdown it publishes ``/helireach/touchdown`` (``diagnostic_msgs/DiagnosticStatus``, latched):
 OK when the landing met the limits, ERROR otherwise, with descent rate, forward speed and rotor
 speed. Time 0 of the scenario is the first timer tick. ``mismatch`` (a preset of
-:mod:`helireach_ros.core.mismatch_presets`, e.g. ``weight+5``; '' = the scenario's own) replaces the scenario's
+:mod:`helireach_ros.core.flight.mismatch_presets`, e.g. ``weight+5``; '' = the scenario's own) replaces the scenario's
 parameter mismatch: the vehicle flies it, the planner is not told.
 
 Run: ``python -m helireach_ros.ros.nodes.sim_vehicle --ros-args -p scenario:=demo_500ft_75kt``.
@@ -29,8 +29,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
 
-from helireach_ros.core.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset
-from helireach_ros.core.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
+from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset
+from helireach_ros.core.flight.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node

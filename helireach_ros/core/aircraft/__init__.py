@@ -1,0 +1,1 @@
+"""The aircraft: the airframe file and its limits, the six-state model after power loss, the rotor's inflow."""

@@ -1,0 +1,1 @@
+"""What the flight tells of the model: today's gross weight and the disturbance accelerations."""

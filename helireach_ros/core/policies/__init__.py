@@ -1,0 +1,1 @@
+"""The nodes' ROS-free policies: failure episodes and supervision, safety status, live reachability, inputs."""
