@@ -149,3 +149,60 @@ def test_the_cycle_check_finds_a_lazy_cycle_and_ignores_type_checking_imports(tm
     graph = module_graph(tmp_path / "helireach_ros")
     assert import_cycles(graph) == [["helireach_ros.core.a", "helireach_ros.core.b"]]
     assert graph["helireach_ros.core.c"] == set()
+
+
+# The core's packages in layers (docs/development.md): a module imports only its own package and lower layers, at
+# run time and in functions alike. Packages of one layer do not import each other.
+CORE_LAYERS = (
+    ("shared",),  # units, resources, array_codec, status_values: the core's top-level modules
+    ("aircraft", "mcap_log"),
+    ("ocp",),
+    ("evidence",),
+    ("planning", "flight"),
+    ("envelope", "estimation"),
+    ("policies",),
+    ("robustness",),
+    ("workers",),
+)
+
+
+def core_package(module: str) -> str | None:
+    """The core package of a module (``shared`` for the core's top-level modules), None outside the core."""
+    parts = module.split(".")
+    if parts[:2] != ["helireach_ros", "core"]:
+        return None
+    if len(parts) == 2 or (PACKAGE / "core" / f"{parts[2]}.py").exists():
+        return "shared"
+    return parts[2]
+
+
+def layer_violations(graph: dict[str, set[str]]) -> list[str]:
+    rank = {package: level for level, packages in enumerate(CORE_LAYERS) for package in packages}
+    found = []
+    for module, imported in sorted(graph.items()):
+        package = core_package(module)
+        if package is None:
+            continue
+        for other in sorted(imported):
+            other_package = core_package(other)
+            if other_package is None or other_package == package:
+                continue
+            if package not in rank or other_package not in rank or rank[other_package] >= rank[package]:
+                found.append(f"{module} ({package}) imports {other} ({other_package})")
+    return found
+
+
+def test_every_core_package_has_a_layer_and_imports_only_lower_layers():
+    packages = {path.name for path in (PACKAGE / "core").iterdir() if (path / "__init__.py").exists()}
+    assert packages | {"shared"} == {package for layer in CORE_LAYERS for package in layer}
+    assert layer_violations(module_graph()) == []
+
+
+def test_the_layer_check_finds_an_upward_import():
+    graph = {
+        "helireach_ros.core.aircraft.model": {"helireach_ros.core.planning.planner", "helireach_ros.core.units"},
+        "helireach_ros.core.planning.planner": {"helireach_ros.core.aircraft.model"},
+    }
+    assert layer_violations(graph) == [
+        "helireach_ros.core.aircraft.model (aircraft) imports helireach_ros.core.planning.planner (planning)"
+    ]
