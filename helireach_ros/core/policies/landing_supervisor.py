@@ -183,11 +183,17 @@ class LandingSupervisor:
     :meth:`replan_decision` before each re-plan; it publishes a plan only inside :meth:`publication`, which refuses
     what must not go out (a plan of a superseded or finished failure, a fallback after a converged plan) and records
     what does, so that the check and the publication are one step for every thread.
+
+    Two locks, as the node had: the failure pointer, counters and episode state under a short one that the
+    executor's callbacks take (a rotor reading, a timer), publications and their records under another, held while
+    the caller publishes, so that no callback waits for a publication. A stop takes the publication lock: a plan is
+    published before it or refused after it.
     """
 
     def __init__(self, settings: SupervisorSettings | None = None) -> None:
         self.settings = settings or SupervisorSettings()
-        self._lock = threading.RLock()
+        self._lock = threading.Lock()  # the failure pointer, count, episode state, counters: short sections only
+        self._publish_lock = threading.RLock()  # a publication's decision, the publication and its record; a stop
         self._failure: FailureEpisode | None = None
         self._episode = EpisodeState()  # the monitor's failure-episode state (no_flag until one arrives)
         self._failure_count = 0
@@ -234,17 +240,16 @@ class LandingSupervisor:
 
     def is_standby(self, record: PublishedPlan) -> bool:
         """Whether a published plan is a standby plan (a live verdict's plan published on the failure)."""
-        with self._lock:
-            return any(record is standby for standby in self.standby_plans)
+        return any(record is standby for standby in self.standby_plans)
 
     def current_plan(self, failure: FailureEpisode) -> CurrentPlan:
         """What the failure's last published plan is."""
-        with self._lock:
-            if not failure.published or failure.current is None:
-                return CurrentPlan.NONE
-            if failure.current.fallback:
-                return CurrentPlan.FALLBACK
-            return CurrentPlan.STANDBY if self.is_standby(failure.current) else CurrentPlan.CONVERGED
+        current = failure.current
+        if not failure.published or current is None:
+            return CurrentPlan.NONE
+        if current.fallback:
+            return CurrentPlan.FALLBACK
+        return CurrentPlan.STANDBY if self.is_standby(current) else CurrentPlan.CONVERGED
 
     # -- events -------------------------------------------------------------------------------------------------
     def start_failure(self, failure_stamp_ns: int, now_ns: int) -> FailureEpisode | None:
@@ -263,14 +268,15 @@ class LandingSupervisor:
         with self._lock:
             self._episode = state
             failure = self._failure
-            if state.started_ns is not None and episode_starts(
-                state, failure.event_stamp_ns if failure is not None else None
-            ):
-                return EpisodeAction.START, None
-            outcome = episode_outcome(state, failure.event_stamp_ns) if failure is not None else None
-            if failure is None or outcome is None or not failure.stop(outcome):
+        if state.started_ns is not None and episode_starts(state, failure.event_stamp_ns if failure else None):
+            return EpisodeAction.START, None
+        outcome = episode_outcome(state, failure.event_stamp_ns) if failure is not None else None
+        if failure is None or outcome is None:
+            return EpisodeAction.NONE, None
+        with self._publish_lock:  # between publications: one in progress goes out first, none follows
+            if failure is not self._failure or not failure.stop(outcome):
                 return EpisodeAction.NONE, None
-            return EpisodeAction.STOP, failure
+        return EpisodeAction.STOP, failure
 
     def deadline_fallback_due(self, now_ns: int) -> FailureEpisode | None:
         """The failure whose deadline fallback is due now (marked handled: once per failure), or None."""
@@ -291,22 +297,21 @@ class LandingSupervisor:
         """A re-plan tick: what to do, for which failure."""
         with self._lock:
             failure = self._failure
-            if failure is None:
-                return TimerAction.IDLE, None
-            current = self.current_plan(failure)
-            action = replan_timer_action(failure_active=failure.active, planner_ready=planner_ready, current=current)
-            return action, failure
+        if failure is None:
+            return TimerAction.IDLE, None
+        current = self.current_plan(failure)
+        action = replan_timer_action(failure_active=failure.active, planner_ready=planner_ready, current=current)
+        return action, failure
 
     def fallback_after_failed_solve(self, failure: FailureEpisode, *, retry: bool, stamp_ns: int) -> bool:
         """Whether a first solve from the state stamped ``stamp_ns`` that failed publishes a fallback."""
-        with self._lock:
-            current = failure.current
-            return fallback_after_failed_first_plan(
-                retry=retry,
-                any_published=failure.published,
-                has_plan_from_state=failure.has_plan_from(stamp_ns),
-                standby_current=current is not None and self.is_standby(current),
-            )
+        current = failure.current
+        return fallback_after_failed_first_plan(
+            retry=retry,
+            any_published=failure.published,
+            has_plan_from_state=failure.has_plan_from(stamp_ns),
+            standby_current=current is not None and self.is_standby(current),
+        )
 
     def replan_decision(
         self, failure: FailureEpisode, *, rotor_measured: bool, height: float, stamp_ns: int
@@ -347,8 +352,7 @@ class LandingSupervisor:
         Late "after a fallback" only if a fallback went out first (a standby before it is a verified plan)."""
         if replan:
             return None
-        with self._lock:
-            after_fallback = any(record.fallback for record in failure.history)
+        after_fallback = any(record.fallback for record in failure.history)
         return plan_lateness(failure.event_stamp_ns, stamp_ns, self.settings.max_message_age, after_fallback)
 
     @contextmanager
@@ -356,7 +360,7 @@ class LandingSupervisor:
         """Holds the decision while the caller publishes: yields whether a plan (``fallback``: a fallback) of
         ``failure`` may go out. Not when a newer failure superseded it or it is over, nor a fallback once a
         converged plan is out."""
-        with self._lock:
+        with self._publish_lock:
             allowed = failure is self._failure and not failure.outcome
             if allowed and fallback:
                 allowed = failure.current is None or failure.current.fallback
@@ -365,12 +369,11 @@ class LandingSupervisor:
     def no_plan_may_be_reported(self, failure: FailureEpisode) -> bool:
         """Whether a "no plan" status may go out for ``failure``: it is current, nothing is published, not over.
         Call inside :meth:`publication`."""
-        with self._lock:
-            return failure is self._failure and not failure.published and not failure.outcome
+        return failure is self._failure and not failure.published and not failure.outcome
 
     def remember(self, failure: FailureEpisode, record: PublishedPlan, *, standby: bool = False) -> None:
         """Records a publication (call inside :meth:`publication`): the failure's current plan, the history."""
-        with self._lock:
+        with self._publish_lock:
             failure.remember(record)
             self.published_plans.append(record)
             del self.published_plans[: -self.settings.history]

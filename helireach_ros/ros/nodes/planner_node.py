@@ -257,19 +257,20 @@ class LandingPlannerNode(Node):
         if state_problems(StateLimits(), rotor=reading):
             return
         now_ns = self._now_ns()
-        # Steady flight before the failure only (after it the episode's weight is fixed); receive times, as every
-        # freshness check here (a replayed log's stamps are old).
-        before_failure = self.supervisor.before_failure
         with self._lock:
             self._rotor = (reading, now_ns)
             odometry = self._odometry
-        if self._backend is not None and before_failure and odometry is not None:
-            if now_ns - odometry[1] <= self.config.state_timeout * 1e9:
-                state = odometry[0]
-                sample = WeightSample(
-                    now_ns, state.forward_speed, state.climb_rate, reading.rotor_speed, reading.engine_power
-                )
-                self._backend.add_weight_sample(sample)
+        backend = self._backend
+        if backend is None or backend.weights is None or odometry is None:
+            return
+        # Steady flight before the failure only (after it the episode's weight is fixed); receive times, as every
+        # freshness check here (a replayed log's stamps are old).
+        if self.supervisor.before_failure and now_ns - odometry[1] <= self.config.state_timeout * 1e9:
+            state = odometry[0]
+            sample = WeightSample(
+                now_ns, state.forward_speed, state.climb_rate, reading.rotor_speed, reading.engine_power
+            )
+            backend.add_weight_sample(sample)
 
     def current_state(self, measured_power: bool = False) -> tuple[np.ndarray, int, str, str] | None:
         """(state y, v, Ω, h, z, P; its stamp ns; vehicle frame; rotor-speed source), or None without a fresh state.
