@@ -33,7 +33,6 @@ import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from functools import partial
 from typing import Any
 
 import numpy as np
@@ -77,13 +76,15 @@ from helireach_ros.display.sections import (
 from helireach_ros.display.server import DisplayServerError, PageServer
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import node_command_line, shutdown_is_a_normal_stop
-from helireach_ros.ros.parameters import ParameterError, declare_checked_parameter
+from helireach_ros.ros.parameter_table import parameter
+from helireach_ros.ros.parameters import ParameterError, declare_parameters
 from helireach_ros.ros.qos import QosWatch
 
 __all__ = [
     "DEFAULT_BIND",
     "DEFAULT_PORT",
     "CockpitDisplay",
+    "DisplayParameters",
     "create_display_with_fallback",
     "hold_until_interrupted",
     "main",
@@ -95,6 +96,28 @@ DEFAULT_BIND = "127.0.0.1"
 _PLAN_STAMP_TOLERANCE_S = 10.0  # a plan stamped further from the receipt time uses the receipt time instead
 # A state at or below this height is on the ground (the monitor's landed_height default, msg_docs/...episode.md).
 _CONTACT_HEIGHT_M = 0.3
+
+
+@dataclass(frozen=True)
+class DisplayParameters:
+    """The cockpit display's parameters (one table: :mod:`helireach_ros.ros.parameter_table`)."""
+
+    port: int = parameter(DEFAULT_PORT, "TCP port of the page (0 = any free port)", (0, 65535))
+    bind: str = parameter(DEFAULT_BIND, "listen address; loopback unless set explicitly")
+    envelope_file: str = parameter("", "H-V envelope file ('' = the shipped envelope)")
+    airframe: str = parameter("", "airframe for rotor limits ('' = the envelope's)")
+    state_topic: str = parameter(rm.TOPIC_STATE, "nav_msgs/Odometry vehicle state topic")
+    rotor_topic: str = parameter(rm.TOPIC_ROTOR, "sensor_msgs/JointState rotor speed topic")
+    stale_after_s: float = parameter(
+        2.0, "NO DATA after this long without a message, s", (0.1, 3600.0), read_only=False
+    )
+    max_update_rate_hz: float = parameter(25.0, "most frames per second sent to one page", (1.0, 120.0))
+    allowed_hosts: str = parameter(
+        "", "more Host header names the page answers, comma separated (e.g. for bind 0.0.0.0)"
+    )
+    rotor_caution_pct: float = parameter(
+        3.0, "amber caution band inside each rotor speed limit, % of nominal", (0.0, 15.0)
+    )
 
 
 # ----------------------------------------------------------------------------------------------------------
@@ -152,26 +175,12 @@ class CockpitDisplay(Node):
         super().__init__("helireach_display", **node_options)
         self._lock = threading.Lock()
         self._latest = _Latest()
-        # a bad override is logged and the default used (ros.parameters.declare_checked_parameter)
-        declare = partial(declare_checked_parameter, self)
-        self._port = declare("port", DEFAULT_PORT, "TCP port of the page (0 = any free port)", (0, 65535))
-        self._bind = declare("bind", DEFAULT_BIND, "listen address; loopback unless set explicitly")
-        self._envelope_file = declare("envelope_file", "", "H-V envelope file ('' = the shipped envelope)")
-        self._airframe_name = declare("airframe", "", "airframe for rotor limits ('' = the envelope's)")
-        state_topic = declare("state_topic", rm.TOPIC_STATE, "nav_msgs/Odometry vehicle state topic")
-        rotor_topic = declare("rotor_topic", rm.TOPIC_ROTOR, "sensor_msgs/JointState rotor speed topic")
-        self._stale_after_s = declare(
-            "stale_after_s", 2.0, "NO DATA after this long without a message, s", (0.1, 3600.0), read_only=False
-        )
-        self._max_update_rate_hz = declare(
-            "max_update_rate_hz", 25.0, "most frames per second sent to one page", (1.0, 120.0)
-        )
-        allowed_hosts = declare(
-            "allowed_hosts", "", "more Host header names the page answers, comma separated (e.g. for bind 0.0.0.0)"
-        )
-        self._rotor_caution_pct = declare(
-            "rotor_caution_pct", 3.0, "amber caution band inside each rotor speed limit, % of nominal", (0.0, 15.0)
-        )
+        self.config = config = declare_parameters(self, DisplayParameters)
+        self._port, self._bind, self._envelope_file = config.port, config.bind, config.envelope_file
+        self._airframe_name, state_topic, rotor_topic = config.airframe, config.state_topic, config.rotor_topic
+        self._stale_after_s = config.stale_after_s  # settable at run time (_on_set_parameters updates it)
+        self._max_update_rate_hz, allowed_hosts = config.max_update_rate_hz, config.allowed_hosts
+        self._rotor_caution_pct = config.rotor_caution_pct
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._state_topic = state_topic
@@ -229,14 +238,14 @@ class CockpitDisplay(Node):
 
     # -- parameters ------------------------------------------------------------------------------------
     def _on_set_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        for parameter in parameters:
-            if parameter.name == "stale_after_s":
-                value = finite(parameter.value)
+        for changed in parameters:
+            if changed.name == "stale_after_s":
+                value = finite(changed.value)
                 if value is None or value <= 0:
                     return SetParametersResult(successful=False, reason="stale_after_s must be a positive number")
-        for parameter in parameters:
-            if parameter.name == "stale_after_s":
-                self._stale_after_s = float(parameter.value)
+        for changed in parameters:
+            if changed.name == "stale_after_s":
+                self._stale_after_s = float(changed.value)
                 with self._lock:
                     self._config = {**self._config, "stale_after_s": self._stale_after_s}
                     self._config_json = to_json(self._config)
@@ -548,6 +557,9 @@ class CockpitDisplay(Node):
         def age(received: _Received | None) -> float | None:
             return None if received is None else max(now - received.received, 0.0)
 
+        def stale(received: _Received) -> bool:
+            return max(now - received.received, 0.0) > stale_after
+
         status_age = age(latest.status)
         if latest.status is None:
             banner = {"level": "nodata", "message": "no safety status received", "margin": None, "envelope_id": None}
@@ -613,18 +625,18 @@ class CockpitDisplay(Node):
             live["state"] = {
                 **latest.state.content,
                 "age_s": age(latest.state),
-                "stale": age(latest.state) > stale_after,
+                "stale": stale(latest.state),
             }
         if latest.rotor is not None:
             live["rotor"] = {
                 **latest.rotor.content,
                 "age_s": age(latest.rotor),
-                "stale": age(latest.rotor) > stale_after,
+                "stale": stale(latest.rotor),
             }
         if latest.failure is not None:
             live["failure"] = {"age_s": age(latest.failure)}
         if latest.episode is not None:
-            live["episode"] = {**latest.episode.content, "stale": age(latest.episode) > stale_after}
+            live["episode"] = {**latest.episode.content, "stale": stale(latest.episode)}
         return live
 
     @staticmethod

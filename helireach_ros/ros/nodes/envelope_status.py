@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
-from functools import partial
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -66,10 +65,11 @@ from helireach_ros.core.policies.safety_status import (
 from helireach_ros.core.policies.vehicle_readings import OdometryReading, StateLimits, state_problems
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import ParameterError, declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.parameter_table import parameter
+from helireach_ros.ros.parameters import ParameterError, declare_aircraft, declare_parameters
 from helireach_ros.ros.qos import QOS_STATUS_SUFFIX, QosWatch, input_problems_of
 
-__all__ = ["EnvelopeStatusNode", "SafetyVerdict", "evaluate_safety", "main"]
+__all__ = ["EnvelopeStatusNode", "EnvelopeStatusParameters", "SafetyVerdict", "evaluate_safety", "main"]
 
 
 @dataclass(frozen=True)
@@ -89,6 +89,30 @@ def evaluate_safety(*args: Any, **kwargs: Any) -> SafetyVerdict:
     return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[assessment.level], assessment.message, assessment.values)
 
 
+@dataclass(frozen=True)
+class EnvelopeStatusParameters:
+    """The envelope status node's own parameters, SI (one table: :mod:`helireach_ros.ros.parameter_table`); the
+    aircraft's (``airframe``, ``gross_weight``, ``density_altitude``) come from ``declare_aircraft``."""
+
+    envelope_file: str = parameter("", "H-V envelope file ('' = the shipped one)", read_only=False)
+    warn_margin: float = parameter(
+        20.0, "WARN below this distance to the boundary (ft/kt units)", (0.0, 1e4), read_only=False
+    )
+    stale_timeout: float = parameter(0.5, "a state older than this is stale, s", (0.01, 60.0))
+    publish_period: float = parameter(0.5, "steady publishing period of the status, s", (0.01, 60.0))
+    diagnostics_period: float = parameter(1.0, "period of /diagnostics, s", (0.05, 60.0))
+    qos_report_timeout: float = parameter(3.0, "a node's QoS report on /diagnostics counts this long, s", (0.1, 600.0))
+    live_max_age: float = parameter(
+        1.0, "a live verdict whose state is older than this is no evidence, s", (0.01, 60.0)
+    )
+    live_warn_value: float = parameter(LIVE_WARN_VALUE, "a safe live verdict with J above this is CAUTION", (-1.0, 0.0))
+    envelope_verdict: str = parameter(
+        "robust",
+        "robust: the envelope's robust verdict where it has one (else nominal, and the status says so); nominal",
+        read_only=False,
+    )
+
+
 class EnvelopeStatusNode(Node):
     """Publishes the safety status of the current state against an H-V envelope.
 
@@ -101,29 +125,15 @@ class EnvelopeStatusNode(Node):
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_envelope_status", **node_options)
-        declare = partial(declare_checked_parameter, self)
         load_aircraft = declare_aircraft(self)
-        envelope_file = declare("envelope_file", "", "H-V envelope file ('' = the shipped one)", read_only=False)
-        self._warn_margin = declare(
-            "warn_margin", 20.0, "WARN below this distance to the boundary (ft/kt units)", (0.0, 1e4), read_only=False
-        )
-        self._stale_timeout = declare("stale_timeout", 0.5, "a state older than this is stale, s", (0.01, 60.0))
-        publish_period = declare("publish_period", 0.5, "steady publishing period of the status, s", (0.01, 60.0))
-        diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
-        self._qos_report_timeout = declare(
-            "qos_report_timeout", 3.0, "a node's QoS report on /diagnostics counts this long, s", (0.1, 600.0)
-        )
-        self._live_max_age = declare(
-            "live_max_age", 1.0, "a live verdict whose state is older than this is no evidence, s", (0.01, 60.0)
-        )
-        self._live_warn_value = declare(
-            "live_warn_value", LIVE_WARN_VALUE, "a safe live verdict with J above this is CAUTION", (-1.0, 0.0)
-        )
-        self._envelope_verdict = declare(
-            "envelope_verdict", "robust",
-            "robust: the envelope's robust verdict where it has one (else nominal, and the status says so); nominal",
-            read_only=False,
+        self.config = config = declare_parameters(self, EnvelopeStatusParameters)
+        envelope_file, publish_period, diagnostics_period = (
+            config.envelope_file, config.publish_period, config.diagnostics_period,
         )  # fmt: skip
+        # settable at run time (on_set_parameters updates them): the table holds the start-up values
+        self._warn_margin, self._envelope_verdict = config.warn_margin, config.envelope_verdict
+        self._stale_timeout, self._qos_report_timeout = config.stale_timeout, config.qos_report_timeout
+        self._live_max_age, self._live_warn_value = config.live_max_age, config.live_warn_value
         if self._envelope_verdict not in VERDICTS:
             raise ParameterError(
                 f"parameter 'envelope_verdict' of {self.get_name()} must be one of {', '.join(VERDICTS)}, "
@@ -201,23 +211,23 @@ class EnvelopeStatusNode(Node):
             self._envelope, self._envelope_error, self._envelope_path = envelope, error, resolved
 
     def _check_parameters(self, parameters: list[Parameter]) -> SetParametersResult:
-        for parameter in parameters:
-            if parameter.name == "envelope_file" and parameter.type_ != Parameter.Type.STRING:
+        for changed in parameters:
+            if changed.name == "envelope_file" and changed.type_ != Parameter.Type.STRING:
                 return SetParametersResult(successful=False, reason="envelope_file must be a string")
-            if parameter.name == "envelope_verdict" and parameter.value not in VERDICTS:
+            if changed.name == "envelope_verdict" and changed.value not in VERDICTS:
                 return SetParametersResult(
                     successful=False, reason=f"envelope_verdict must be one of {', '.join(VERDICTS)}"
                 )
         return SetParametersResult(successful=True)
 
     def _apply_parameters(self, parameters: list[Parameter]) -> None:
-        for parameter in parameters:
-            if parameter.name == "envelope_file":
-                self._load_envelope(parameter.value)
-            elif parameter.name == "warn_margin":
-                self._warn_margin = float(parameter.value)
-            elif parameter.name == "envelope_verdict":
-                self._envelope_verdict = str(parameter.value)
+        for changed in parameters:
+            if changed.name == "envelope_file":
+                self._load_envelope(changed.value)
+            elif changed.name == "warn_margin":
+                self._warn_margin = float(changed.value)
+            elif changed.name == "envelope_verdict":
+                self._envelope_verdict = str(changed.value)
         self._publish(force=True)
 
     def _on_state(self, message: Odometry) -> None:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import threading
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from functools import partial
 from typing import Any
 
@@ -44,13 +45,50 @@ from helireach_ros.core.policies.vehicle_readings import StateLimits, state_prob
 from helireach_ros.ros import fast_logging
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import declare_checked_parameter
+from helireach_ros.ros.parameter_table import parameter
+from helireach_ros.ros.parameters import declare_parameters
 from helireach_ros.ros.qos import QosWatch
 
-__all__ = ["VehicleMonitor", "main"]
+__all__ = ["MonitorParameters", "VehicleMonitor", "main"]
 
 _FUTURE_TOLERANCE_S = 0.05  # clocks of two machines never agree exactly
 _RECENT_FLAGS = 256  # flag observations kept to see whether publishers disagree (1 s at up to 256 Hz)
+
+
+_LIMITS = StateLimits()  # the plausible ranges' defaults
+_EPISODE = EpisodeSettings()  # the failure episode's defaults
+
+
+@dataclass(frozen=True)
+class MonitorParameters:
+    """The monitor's parameters, SI (one table: :mod:`helireach_ros.ros.parameter_table`)."""
+
+    rotor_joint: str = parameter(rm.ROTOR_JOINT, "JointState joint whose velocity is the rotor speed")
+    max_message_age: float = parameter(
+        1.0, "reject state messages whose stamp is older than this, s (0 = no check)", (0.0, 3600.0)
+    )
+    max_input_bytes: int = parameter(
+        65536, "odometry or rotor messages larger than this are rejected unread, bytes", (256, 1 << 30)
+    )
+    stale_timeout: float = parameter(0.5, "no valid state for this long = STALE, s", (0.01, 60.0))
+    min_height: float = parameter(_LIMITS.min_height, "lowest plausible height, m", (-100.0, 0.0))
+    max_height: float = parameter(_LIMITS.max_height, "highest plausible height, m", (1.0, 1e5))
+    max_forward_speed: float = parameter(
+        _LIMITS.max_forward_speed, "largest plausible |forward speed|, m/s", (1.0, 500.0)
+    )
+    max_climb_rate: float = parameter(_LIMITS.max_climb_rate, "largest plausible |climb rate|, m/s", (1.0, 500.0))
+    min_rotor_speed: float = parameter(_LIMITS.min_rotor_speed, "lowest plausible rotor speed, rad/s", (1e-3, 1e3))
+    max_rotor_speed: float = parameter(_LIMITS.max_rotor_speed, "highest plausible rotor speed, rad/s", (1.0, 1e4))
+    recovery_hold: float = parameter(
+        _EPISODE.recovery_hold, "steady false flag that ends an episode, s", (0.01, 3600.0)
+    )
+    landed_height: float = parameter(_EPISODE.landed_height, "failed and at most this high = landed, m", (0.0, 100.0))
+    landed_climb_rate: float = parameter(
+        _EPISODE.landed_climb_rate, "largest |climb rate| that counts as landed, m/s", (0.001, 100.0)
+    )
+    diagnostics_period: float = parameter(1.0, "period of /diagnostics, s", (0.05, 60.0))
+    world_frame: str = parameter(rm.DEFAULT_WORLD_FRAME, "required odometry header.frame_id")
+    body_frame: str = parameter(rm.DEFAULT_BODY_FRAME, "required odometry child_frame_id")
 
 
 class VehicleMonitor(Node):
@@ -67,48 +105,25 @@ class VehicleMonitor(Node):
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_monitor", **node_options)
-        declare = partial(declare_checked_parameter, self)
-        self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "JointState joint whose velocity is the rotor speed")
-        self._max_message_age = declare(
-            "max_message_age",
-            1.0,
-            "reject state messages whose stamp is older than this, s (0 = no check)",
-            (0.0, 3600.0),
-        )
-        self._max_input_bytes = declare(
-            "max_input_bytes",
-            65536,
-            "odometry or rotor messages larger than this are rejected unread, bytes",
-            (256, 1 << 30),
-        )
-        self._stale_timeout = declare("stale_timeout", 0.5, "no valid state for this long = STALE, s", (0.01, 60.0))
-        defaults = StateLimits()
+        self.config = config = declare_parameters(self, MonitorParameters)
+        self._rotor_joint = config.rotor_joint
+        self._max_message_age = config.max_message_age
+        self._max_input_bytes = config.max_input_bytes
+        self._stale_timeout = config.stale_timeout
         self._limits = StateLimits(
-            min_height=declare("min_height", defaults.min_height, "lowest plausible height, m", (-100.0, 0.0)),
-            max_height=declare("max_height", defaults.max_height, "highest plausible height, m", (1.0, 1e5)),
-            max_forward_speed=declare(
-                "max_forward_speed", defaults.max_forward_speed, "largest plausible |forward speed|, m/s", (1.0, 500.0)
-            ),
-            max_climb_rate=declare(
-                "max_climb_rate", defaults.max_climb_rate, "largest plausible |climb rate|, m/s", (1.0, 500.0)
-            ),
-            min_rotor_speed=declare(
-                "min_rotor_speed", defaults.min_rotor_speed, "lowest plausible rotor speed, rad/s", (1e-3, 1e3)
-            ),
-            max_rotor_speed=declare(
-                "max_rotor_speed", defaults.max_rotor_speed, "highest plausible rotor speed, rad/s", (1.0, 1e4)
-            ),
+            min_height=config.min_height,
+            max_height=config.max_height,
+            max_forward_speed=config.max_forward_speed,
+            max_climb_rate=config.max_climb_rate,
+            min_rotor_speed=config.min_rotor_speed,
+            max_rotor_speed=config.max_rotor_speed,
         )
         self._episode_settings = EpisodeSettings(
-            recovery_hold=declare("recovery_hold", 3.0, "steady false flag that ends an episode, s", (0.01, 3600.0)),
-            landed_height=declare("landed_height", 0.3, "failed and at most this high = landed, m", (0.0, 100.0)),
-            landed_climb_rate=declare(
-                "landed_climb_rate", 0.3, "largest |climb rate| that counts as landed, m/s", (0.001, 100.0)
-            ),
+            recovery_hold=config.recovery_hold,
+            landed_height=config.landed_height,
+            landed_climb_rate=config.landed_climb_rate,
         )
-        diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
-        world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "required odometry header.frame_id")
-        body_frame = declare("body_frame", rm.DEFAULT_BODY_FRAME, "required odometry child_frame_id")
+        diagnostics_period, world_frame, body_frame = config.diagnostics_period, config.world_frame, config.body_frame
 
         self._lock = threading.Lock()
         self._counts = {

@@ -33,6 +33,7 @@ import os
 import sys
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -50,12 +51,14 @@ from helireach_ros.core.mcap_log import McapLogError, McapLogWriter, QosDescript
 from helireach_ros.core.mcap_log.run_metadata import aircraft_metadata, status_metadata_updates
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import declare_aircraft, declare_checked_parameter
+from helireach_ros.ros.parameter_table import parameter
+from helireach_ros.ros.parameters import declare_aircraft, declare_parameters
 from helireach_ros.ros.qos import QosWatch
 
 __all__ = [
     "DEFAULT_TOPICS",
     "McapRecorder",
+    "RecorderParameters",
     "documented_qos",
     "import_message_type",
     "main",
@@ -159,6 +162,25 @@ def _request_qos(topic: str, publishers: Sequence[TopicEndpointInfo]) -> QoSProf
     )
 
 
+@dataclass(frozen=True)
+class RecorderParameters:
+    """The recorder's own parameters (one table: :mod:`helireach_ros.ros.parameter_table`); the aircraft's
+    (``airframe``, ``gross_weight``, ``density_altitude``, for the log's metadata) come from ``declare_aircraft``."""
+
+    log_dir: str = parameter("~/.helireach/logs", "Directory for the .mcap logs.")
+    topics: list = parameter(list(DEFAULT_TOPICS), "Recorded topics as /topic:pkg/msg/Type.")
+    chunk_size: int = parameter(64 * 1024, "Uncompressed bytes per MCAP chunk.", (1024, 1 << 30))
+    flush_period: float = parameter(
+        0.5, "Longest wait of a message in memory, s (bounds loss on a hard kill); 0 = off.", (0.0, 60.0)
+    )
+    max_message_bytes: int = parameter(
+        1 << 20,
+        "Messages larger than this are not written (counted per topic in the log's metadata), bytes; 0 = any.",
+        (0, 1 << 31),
+    )
+    planner_settings: str = parameter("", "planner settings file for the metadata ('' = config/planner.yaml)")
+
+
 class McapRecorder(Node):
     """Record topics into ``<log_dir>/helireach_<UTC yyyymmdd_HHMMSS>_<pid>.mcap``.
 
@@ -176,26 +198,15 @@ class McapRecorder(Node):
     def __init__(self, metadata: Mapping[str, str] | None = None, **kwargs: Any) -> None:
         super().__init__("helireach_recorder", **kwargs)
         self._closed = False
-        declare = partial(declare_checked_parameter, self)
-        log_dir = declare("log_dir", "~/.helireach/logs", "Directory for the .mcap logs.")
-        entries = declare("topics", list(DEFAULT_TOPICS), "Recorded topics as /topic:pkg/msg/Type.")
-        chunk_size = declare("chunk_size", 64 * 1024, "Uncompressed bytes per MCAP chunk.", (1024, 1 << 30))
-        flush_period = declare(
-            "flush_period",
-            0.5,
-            "Longest wait of a message in memory, s (bounds loss on a hard kill); 0 = off.",
-            (0.0, 60.0),
-        )
-        self._max_message_bytes = declare(
-            "max_message_bytes",
-            1 << 20,
-            "Messages larger than this are not written (counted per topic in the log's metadata), bytes; 0 = any.",
-            (0, 1 << 31),
-        )
+        self.config = config = declare_parameters(self, RecorderParameters)
         load_aircraft = declare_aircraft(self)
-        settings_file = declare(
-            "planner_settings", "", "planner settings file for the metadata ('' = config/planner.yaml)"
+        log_dir, entries, chunk_size, flush_period = (
+            config.log_dir,
+            config.topics,
+            config.chunk_size,
+            config.flush_period,
         )
+        self._max_message_bytes, settings_file = config.max_message_bytes, config.planner_settings
         self._pending = _parse_topics(entries)
         directory = Path(os.path.expandvars(os.path.expanduser(log_dir)))
         directory.mkdir(parents=True, exist_ok=True)

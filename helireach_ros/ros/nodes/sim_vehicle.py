@@ -18,7 +18,7 @@ Run: ``python -m helireach_ros.ros.nodes.sim_vehicle --ros-args -p scenario:=dem
 from __future__ import annotations
 
 import threading
-from functools import partial
+from dataclasses import dataclass
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -34,9 +34,10 @@ from helireach_ros.core.flight.simulation import ControlSchedule, SimulatedVehic
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
-from helireach_ros.ros.parameters import ParameterError, declare_checked_parameter
+from helireach_ros.ros.parameter_table import parameter
+from helireach_ros.ros.parameters import ParameterError, declare_parameters
 
-__all__ = ["SimVehicleNode", "main", "touchdown_status"]
+__all__ = ["SimVehicleNode", "SimVehicleParameters", "main", "touchdown_status"]
 
 _MISMATCH_CHOICES = ", ".join(MISMATCH_PRESET_NAMES)
 _MAX_STEP_S = 0.5  # a stalled timer must not make the vehicle jump further than this in one go
@@ -75,6 +76,22 @@ def touchdown_status(report: TouchdownReport, vehicle: SimulatedVehicle, name: s
     return rm.diagnostic_status(level, f"{name}: touchdown", text, vehicle.airframe.name, values)
 
 
+@dataclass(frozen=True)
+class SimVehicleParameters:
+    """The simulated vehicle's parameters, SI (one table: :mod:`helireach_ros.ros.parameter_table`)."""
+
+    scenario: str = parameter("demo_500ft_75kt", "scenario name (config/scenarios) or file")
+    mismatch: str = parameter(
+        "", f"model mismatch preset flown instead of the scenario's ('' = its own; {_MISMATCH_CHOICES})"
+    )
+    publish_period: float = parameter(0.04, "sensor publishing (and integration) period, s", (1e-3, 1.0))
+    world_frame: str = parameter(rm.DEFAULT_WORLD_FRAME, "odometry frame")
+    body_frame: str = parameter(rm.DEFAULT_BODY_FRAME, "vehicle frame (gravity/heading aligned)")
+    rotor_joint: str = parameter(rm.ROTOR_JOINT, "rotor joint name")
+    publish_engine_power: bool = parameter(True, "publish engine torque as the rotor effort")
+    diagnostics_period: float = parameter(1.0, "period of /diagnostics, s", (0.05, 60.0))
+
+
 class SimVehicleNode(Node):
     """Publishes a simulated vehicle's sensors and follows the landing trajectory after a failure.
 
@@ -90,18 +107,15 @@ class SimVehicleNode(Node):
 
     def __init__(self, **node_options: Any) -> None:
         super().__init__("helireach_sim_vehicle", **node_options)
-        declare = partial(declare_checked_parameter, self)
-        scenario_name = declare("scenario", "demo_500ft_75kt", "scenario name (config/scenarios) or file")
-        mismatch = declare(
-            "mismatch", "", f"model mismatch preset flown instead of the scenario's ('' = its own; {_MISMATCH_CHOICES})"
+        self.config = config = declare_parameters(self, SimVehicleParameters)
+        scenario_name, mismatch = config.scenario, config.mismatch
+        publish_period, diagnostics_period = config.publish_period, config.diagnostics_period
+        self._world_frame, self._body_frame, self._rotor_joint = (
+            config.world_frame,
+            config.body_frame,
+            config.rotor_joint,
         )
-        publish_period = declare("publish_period", 0.04, "sensor publishing (and integration) period, s", (1e-3, 1.0))
-        self._world_frame = declare("world_frame", rm.DEFAULT_WORLD_FRAME, "odometry frame")
-        self._body_frame = declare("body_frame", rm.DEFAULT_BODY_FRAME, "vehicle frame (gravity/heading aligned)")
-        self._rotor_joint = declare("rotor_joint", rm.ROTOR_JOINT, "rotor joint name")
-        self._publish_power = declare("publish_engine_power", True, "publish engine torque as the rotor effort")
-        diagnostics_period = declare("diagnostics_period", 1.0, "period of /diagnostics, s", (0.05, 60.0))
-
+        self._publish_power = config.publish_engine_power
         self.scenario = load_scenario(scenario_name)
         if mismatch:
             try:
