@@ -40,11 +40,9 @@ margin setting, on the same draws): ``weight``: plan for the gross weight estima
 the steady flight before the failure (:mod:`helireach_ros.core.estimation.gross_weight`, which also absorbs the drag and
 c_d errors into that weight); ``disturbance``: re-plan for the model plus the disturbance accelerations
 learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.estimation.disturbance`);
-``latency``: each
-re-plan starts from the current plan flown ahead in the model for the latency
+``latency``: each re-plan starts from the current plan flown ahead in the model for the latency
 (:attr:`~helireach_ros.core.robustness.closed_loop.ClosedLoopSettings.compensate_latency`). ``--state-gains``: the
-disturbance
-estimate's state gain α (below 1 an α–β observer whose filtered state the plans start from).
+disturbance estimate's state gain α (below 1 an α–β observer whose filtered state the plans start from).
 
 Re-planning periods (``--replan-periods``): s between re-plans (the planner node's ``replan_period``); each is run
 with every objective, policy and margin setting, on the same draws.

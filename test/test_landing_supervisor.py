@@ -1,6 +1,5 @@
 """The planner node's failure-handling rules (core/policies/landing_supervisor.py), without ROS: every branch of the
-fallback,
-deadline, timer and re-plan decisions, including the orders of events the chaos and fuzz tests found."""
+fallback, deadline, timer and re-plan decisions, including the orders of events the chaos and fuzz tests found."""
 
 from __future__ import annotations
 

@@ -1,6 +1,5 @@
 """The planner node's solvers without ROS (core/workers/planner_backend.py): what it loads, and that a failure's solve
-or
-fallback answers with a plan or a reason, never an exception."""
+or fallback answers with a plan or a reason, never an exception."""
 
 from __future__ import annotations
 

@@ -21,11 +21,9 @@ Deviations from the paper, on purpose:
   derivatives at C_T = 0, Ω → 0 and V_f = 0; the guards change values by < 1e-6 relative in the
   flight envelope;
 * the rotor's aerodynamics are the airframe's :class:`~helireach_ros.core.aircraft.inflow.RotorModel`: either the
-  paper's
-  hover induced velocity at every speed (its U_T defined but unused;
+  paper's hover induced velocity at every speed (its U_T defined but unused;
   :data:`~helireach_ros.core.aircraft.inflow.PAPER_ROTOR_MODEL`, what the shipped airframes and the ``paper`` method
-  use),
-  or momentum-theory induced velocity in forward flight, climb and descent with an empirical vortex-ring bridge,
+  use), or momentum-theory induced velocity in forward flight, climb and descent with an empirical vortex-ring bridge,
   ground effect, an induced power factor and profile power that grows with the advance ratio
   (:mod:`~helireach_ros.core.aircraft.inflow`, :func:`_rotor_terms`).
 """
@@ -257,8 +255,7 @@ def implicit_inflow_functions(airframe: Airframe) -> tuple[ca.Function, ca.Funct
     Returns ``(dynamics, residuals, roots)``: ``dynamics(x[6], u[2], d[3], r[2]) -> xdot[6]`` is
     :func:`disturbed_dynamics_function` with r = (ν_G(U_T, U_P), ν_G(0, U_P)) in m/s given instead of found by
     Newton steps; ``residuals(x, u, r) -> [2]`` are :func:`~helireach_ros.core.aircraft.inflow.momentum_root_residual`
-    over
-    the hover v_h² (zero at the roots; O(1)); ``roots(x, u) -> r[2]`` are the Newton-step roots every other
+    over the hover v_h² (zero at the roots; O(1)); ``roots(x, u) -> r[2]`` are the Newton-step roots every other
     consumer uses (a consistent starting point). Equal to :func:`disturbed_dynamics_function` at the roots, to the
     Newton steps' accuracy.
 

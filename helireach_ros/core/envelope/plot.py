@@ -10,8 +10,8 @@ squares; an ambiguous saddle cell is shaded through its middle, the conservative
 refined boundary is drawn as a curve through those points. Unverified and failed nodes get their
 own markers. An optional flown track (height m, speed m/s) is drawn on top. An envelope with robust verdicts
 (:mod:`helireach_ros.core.robustness.envelope_verdicts`) also gets its **robust boundary**: the edge of the set not
-proven
-robustly safe (cells with a corner that is not robust), dashed, and markers on the safe nodes that are not robust.
+proven robustly safe (cells with a corner that is not robust), dashed, and markers on the safe nodes that are not
+robust.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """Which gross weight to plan for, from the steady flight the planner node sees before a failure.
 
 :func:`~helireach_ros.core.estimation.gross_weight.estimate_gross_weight` turns one steady flight (speed, climb rate,
-engine
-power) into the weight whose trim power is that power. On line the readings are noisy and the aircraft is not
+engine power) into the weight whose trim power is that power. On line the readings are noisy and the aircraft is not
 always steady, so :class:`WeightTracker` adds the policy around it:
 
 - **A short average.** The samples of the last ``window_s`` (state stamps; out-of-order or non-finite samples are

@@ -92,8 +92,7 @@ def flyability_values(report: Any) -> dict[str, Any]:
 
 def plan_values(plan: Any) -> dict[str, Any]:
     """The values that describe a converged plan itself (a :class:`~helireach_ros.core.planning.planner.LandingPlan`);
-    the
-    node's bookkeeping (warm start, re-plan index, latency, failure and state) is added by the reports below."""
+    the node's bookkeeping (warm start, re-plan index, latency, failure and state) is added by the reports below."""
     touchdown = plan.replay.touchdown_state
     return {
         "status": plan.status,

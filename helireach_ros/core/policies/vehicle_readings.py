@@ -2,8 +2,7 @@
 
 The ROS nodes translate a vehicle's ``Odometry`` and rotor ``JointState`` into these readings
 (:mod:`helireach_ros.ros.messages`); the input contract (:mod:`~helireach_ros.core.policies.input_contract`) and the
-safety
-status (:mod:`~helireach_ros.core.policies.safety_status`) judge them without ROS.
+safety status (:mod:`~helireach_ros.core.policies.safety_status`) judge them without ROS.
 """
 
 from __future__ import annotations

@@ -49,8 +49,7 @@ class ClosedLoopSettings:
             (its measured engine power), not the airframe file's.
         estimate_disturbance: re-plan for the model plus the disturbance accelerations learnt from the
             prediction error of each re-planning interval (:mod:`helireach_ros.core.estimation.disturbance`); on, as in
-            the
-            planner node.
+            the planner node.
         compensate_latency: a re-plan starts ``latency`` s after its measurement: from the state the planner's
             model (with the disturbance estimate) predicts along the current plan for that long, with the control
             the current plan flies then. Off by default, as in the planner node: measured in

@@ -26,8 +26,7 @@ Sensor noise and its seed are the scenario's (zero noise gives a deterministic v
 
 With ``stop_at_first_failure`` the flights stop at the first model whose closed loop fails: the verdict
 cannot change after it, and an envelope (:mod:`helireach_ros.core.robustness.envelope_verdicts`) does not pay for the
-rest.
-Such a verdict lists the models flown, not the design; ``design_size`` says how many it holds.
+rest. Such a verdict lists the models flown, not the design; ``design_size`` says how many it holds.
 """
 
 from __future__ import annotations

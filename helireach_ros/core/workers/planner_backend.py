@@ -4,8 +4,7 @@ A :class:`PlannerBackend` is built once at start-up from the airframe (with toda
 and :class:`BackendSettings`: it loads the envelope when it was computed for the same airframe, settings and total
 power loss (warm starts, fallbacks; one made for other conditions is refused), starts the
 :class:`~helireach_ros.core.workers.solver_pool.SolverPool` (``solver_workers`` ≥ 1) or builds the NLP in this process
-and
-solves one warm-up landing, keeps the gross-weight tracker (``estimate_weight``) and the background robust
+and solves one warm-up landing, keeps the gross-weight tracker (``estimate_weight``) and the background robust
 verification. The node asks it to solve, to fall back, and what it holds; every solve it makes for a failure either
 returns a plan or says why not, never raises.
 """

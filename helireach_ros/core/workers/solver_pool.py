@@ -20,17 +20,16 @@ the NLP built once and warmed up.
 - **Start method.** ``forkserver`` (or ``spawn``), never ``fork``: the parent runs rclpy's threads.
 - **Gross weight**. A request may name the gross weight to plan for (NaN: the airframe's). A worker
   builds that weight's NLP at the first request for it (:func:`~helireach_ros.core.planning.planner.get_planner` caches
-  up
-  to 16 per process; the compiled-NLP cache is keyed by the NLP's hash, so a new weight runs on plain CasADi
-  functions) and keeps it (the airframe's and the 15 most recent others). The pool records which weights each
-  worker holds (:meth:`SolverPool.ready_weights`). A failure job goes to an idle worker that holds its weight; a
-  live job to one that lacks it, so the workers build a new weight one after the other before any failure. Before a
-  failure only one live job runs at a time and it runs on a worker lacking the weight whenever one is idle, so a
-  weight one ready worker holds finds that worker idle at the failure: no NLP is built in the failure path. A worker
-  restarted after it had reported ready builds (and warms up) every weight its predecessor held before it reports
-  ready, so a restart does not put an NLP build in front of the next failure job (a build takes seconds, longer than
-  a failure job's timeout); one that died before it was ready is restarted with the airframe's weight only, so an
-  NLP whose build kills its worker does not restart for ever.
+  up to 16 per process; the compiled-NLP cache is keyed by the NLP's hash, so a new weight runs on plain CasADi
+  functions) and keeps it (the airframe's and the 15 most recent others). The pool records which weights each worker
+  holds (:meth:`SolverPool.ready_weights`). A failure job goes to an idle worker that holds its weight; a live job to
+  one that lacks it, so the workers build a new weight one after the other before any failure. Before a failure only one
+  live job runs at a time and it runs on a worker lacking the weight whenever one is idle, so a weight one ready worker
+  holds finds that worker idle at the failure: no NLP is built in the failure path. A worker restarted after it had
+  reported ready builds (and warms up) every weight its predecessor held before it reports ready, so a restart does not
+  put an NLP build in front of the next failure job (a build takes seconds, longer than a failure job's timeout); one
+  that died before it was ready is restarted with the airframe's weight only, so an NLP whose build kills its worker
+  does not restart for ever.
 """
 
 from __future__ import annotations
@@ -317,9 +316,8 @@ class SolverPool:
         """Queues a solve; the future gives the :class:`~helireach_ros.core.planning.planner.LandingPlan`.
 
         ``initial_control``, ``reaction_delay_s`` and ``disturbance`` are passed to
-        :meth:`~helireach_ros.core.planning.planner.LandingPlanner.plan` (None: its defaults). ``gross_weight`` (N,
-        None =
-        the pool's airframe's): plan for the airframe at that weight (module docstring).
+        :meth:`~helireach_ros.core.planning.planner.LandingPlanner.plan` (None: its defaults). ``gross_weight`` (N, None
+        = the pool's airframe's): plan for the airframe at that weight (module docstring).
 
         ``cold_check``: a warm plan that is not safe is solved again cold in the worker
         (:func:`~helireach_ros.core.policies.live_reachability.solve_with_cold_check`). The future raises

@@ -83,8 +83,7 @@ class SafetyVerdict:
 
 def evaluate_safety(*args: Any, **kwargs: Any) -> SafetyVerdict:
     """The safety status of a state (:func:`helireach_ros.core.policies.safety_status.assess_safety`, same arguments)
-    with its
-    level as the ``DiagnosticStatus`` constant."""
+    with its level as the ``DiagnosticStatus`` constant."""
     assessment = assess_safety(*args, **kwargs)
     return SafetyVerdict(rm.DIAGNOSTIC_LEVELS[assessment.level], assessment.message, assessment.values)
 

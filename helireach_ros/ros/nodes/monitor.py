@@ -8,11 +8,10 @@ expected ``world_frame``/``body_frame``, stamp newer than the latest accepted on
 state (``/helireach/state``, ``/helireach/rotor_state``).
 The failure flag and the valid state drive the failure-episode model
 (:class:`~helireach_ros.core.policies.failure_episode.EpisodeTracker`): each episode start is published once as a
-failure
-event (``/helireach/failure_event``, ``std_msgs/Header`` stamped with the episode's first true), its state on
-``/helireach/failure_episode`` (on change and every ``diagnostics_period``); until a flag arrives the
-diagnostics WARN "no engine-failure flag received". Rejected input is counted, logged
-(throttled) and reported on ``/diagnostics``; the node never raises out of a callback.
+failure event (``/helireach/failure_event``, ``std_msgs/Header`` stamped with the episode's first true), its state on
+``/helireach/failure_episode`` (on change and every ``diagnostics_period``); until a flag arrives the diagnostics WARN
+"no engine-failure flag received". Rejected input is counted, logged (throttled) and reported on ``/diagnostics``; the
+node never raises out of a callback.
 
 Run: ``python -m helireach_ros.ros.nodes.monitor`` (or the ``helireach_monitor`` console script).
 """

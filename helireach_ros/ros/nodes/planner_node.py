@@ -2,11 +2,10 @@
 
 The node translates: ROS inputs to core calls, their answers to messages. The failure handling is
 :class:`~helireach_ros.core.policies.landing_supervisor.LandingSupervisor`, the statuses are
-:mod:`helireach_ros.core.policies.plan_status`, solves run in a
-:class:`~helireach_ros.core.workers.solver_pool.SolverPool` (or on the
-node's solver thread), live verdicts come from :class:`~helireach_ros.core.policies.live_reachability.LiveEvaluator`.
-What it
-does, parameter by parameter: docs/guides/planner-node.md.
+:mod:`helireach_ros.core.policies.plan_status`, the solvers are
+:class:`~helireach_ros.core.workers.planner_backend.PlannerBackend` (a solver pool, or this process), live verdicts
+come from :class:`~helireach_ros.core.policies.live_reachability.LiveEvaluator`. What it does, parameter by
+parameter: docs/guides/planner-node.md.
 
 Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_planner`` console script).
 """

@@ -85,8 +85,7 @@ class Transcription(ABC):
 
     The NLP parameter is the initial state, the control flown then and the disturbance accelerations the
     dynamics carry (:func:`~helireach_ros.core.aircraft.model.disturbed_dynamics_function`; :data:`PARAMETER_SIZE`).
-    Subclasses
-    define the decision vector, constraints, cold initial guess and decoding; this class supplies scaling,
+    Subclasses define the decision vector, constraints, cold initial guess and decoding; this class supplies scaling,
     bounds and the IPOPT solvers (on compiled NLP functions when the cache has them,
     :mod:`helireach_ros.core.ocp.compiled_nlp`; ``nlp_functions`` says which; with the block LDL^T as IPOPT's linear
     solver where it can be built, :mod:`helireach_ros.core.ocp.block_ldl`; ``linear_solver`` says which).
