@@ -18,6 +18,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
+from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -30,6 +31,7 @@ from helireach_ros.core.estimation.weight_tracking import (
     plausible_band,
 )
 from helireach_ros.core.planning.fallback import FallbackPlan, fallback_plan
+from helireach_ros.core.policies.live_reachability import solve_with_cold_check
 from helireach_ros.core.workers.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 
 if TYPE_CHECKING:
@@ -287,10 +289,6 @@ class PlannerBackend:
 
     def solve_live(self, state: np.ndarray, warm_start: Any, gross_weight: float) -> Any:
         """A live evaluation in this process (the cold check, as in the workers); the weight is built if new."""
-        from functools import partial
-
-        from helireach_ros.core.policies.live_reachability import solve_with_cold_check
-
         solve = partial(self.in_process_planner(gross_weight).plan, reaction_delay_s=self.reaction_delay_s)
         plan = solve_with_cold_check(solve, state, warm_start)
         with self._lock:
