@@ -20,6 +20,7 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from helireach_ros.core.estimation.weight_tracking import WeightChoice
 from helireach_ros.core.evidence.plan_verdict import plan_verdict
 from helireach_ros.core.policies.failure_episode import EpisodePhase, PlanLateness, late_verdict
 
@@ -28,7 +29,6 @@ if TYPE_CHECKING:
 
     import numpy as np
 
-    from helireach_ros.core.estimation.weight_tracking import WeightChoice
     from helireach_ros.core.planning.fallback import FallbackPlan
     from helireach_ros.core.policies.failure_episode import EpisodeState, FailureEpisode
     from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveVerdict
@@ -219,8 +219,6 @@ def fallback_report(
     latency_ms: float,
 ) -> StatusReport:
     """The status of a fallback: WARN, never safe; the file's model (no weight estimate behind it)."""
-    from helireach_ros.core.estimation.weight_tracking import WeightChoice
-
     weight = WeightChoice(identity.gross_weight, "file", 0.0, "fallback controls from the file's model")
     values = {
         "status": "fallback",

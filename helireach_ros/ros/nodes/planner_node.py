@@ -129,10 +129,6 @@ class LandingPlannerNode(Node):
         self._standby_messages: PlanMessages | None = None  # the standby's messages, built when its verdict came
 
         self._backend: PlannerBackend | None = None  # None = not configured (a broken airframe or settings file)
-        self.planner: Any | None = None  # the in-process LandingPlanner, or the SolverPool; None = not configured
-        self._pool: Any | None = None  # the SolverPool (solver_workers >= 1)
-        self._robust: Any | None = None  # a BackgroundRobustVerification when robust_verification is on
-        self.envelope: Any | None = None
         self._setup_error = ""
         self.robust_verdicts: list[tuple[tuple[int, int, int], Any | None]] = []  # published: (key, summary|None)
         backend = BackendSettings(
@@ -208,13 +204,30 @@ class LandingPlannerNode(Node):
         # for other conditions is refused: cold starts, autorotation-entry fallback).
         self.airframe, self.settings = airframe, settings
         backend = PlannerBackend(airframe, settings, backend_settings, lambda level, text: report[level](text))
-        self._backend, self.planner, self._pool, self._robust = backend, backend.planner, backend.pool, backend.robust
-        self.envelope = backend.envelope
+        self._backend = backend
         where = f"{backend_settings.solver_workers} solver workers" if backend.pool else "solving in this process"
         logger.info(
             f"planner ready for {airframe.name} ({settings.method}, {settings.intervals} intervals) "
             f"in {backend.startup_s:.2f} s, {where}; {backend.envelope_note}"
         )
+
+    @property
+    def planner(self) -> Any | None:
+        """The in-process LandingPlanner or the SolverPool; None: not configured (a broken airframe or settings)."""
+        return self._backend.planner if self._backend is not None else None
+
+    @property
+    def envelope(self) -> Any | None:
+        """The envelope used for warm starts and fallbacks (None: none usable)."""
+        return self._backend.envelope if self._backend is not None else None
+
+    @property
+    def _pool(self) -> Any | None:
+        return self._backend.pool if self._backend is not None else None
+
+    @property
+    def _robust(self) -> Any | None:
+        return self._backend.robust if self._backend is not None else None
 
     def _replanning_policy(self) -> Any:
         """This node's re-planning policy as the closed loop flies it (what the robust verification checks)."""
@@ -781,7 +794,8 @@ class LandingPlannerNode(Node):
             return
         pool = self._pool
         failure = self.supervisor.failure
-        current = self.current_state() if failure is not None and failure.active else None
+        asked = failure is not None and failure.active and failure.replans_skipped_no_rotor
+        current = self.current_state() if asked else None
         health = PlannerHealth(
             airframe=self.airframe.name,
             method=self.settings.method,
