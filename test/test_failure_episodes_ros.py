@@ -259,9 +259,10 @@ def test_a_planner_that_missed_the_event_plans_from_the_episode_and_stops_when_l
         assert rm.status_values(landed)["safe"] == "false" and rm.status_values(landed)["failure_id"] == "1"
         # on the ground with the engine still out, live evaluation stays paused (its solves from a rotor running
         # down only failed, at full effort)
-        evaluations = (planner._live.evaluations, planner._live.errors) if planner._live is not None else None
+        live = planner.live.evaluator if planner.live is not None else None
+        evaluations = (live.evaluations, live.errors) if live is not None else None
         run_for(harness, 1.5, on_the_ground, 0.04)
-        assert evaluations is None or (planner._live.evaluations, planner._live.errors) == evaluations
+        assert live is None or (live.evaluations, live.errors) == evaluations
     finally:
         harness.close()
 

@@ -69,7 +69,7 @@ def _record_published(monkeypatch, planner: Any, name: str) -> list[tuple[Any, A
     publish = publisher.publish
 
     def recording(message: Any) -> None:
-        published.append((message, planner._standby_messages))
+        published.append((message, planner.live.standby_messages))
         publish(message)
 
     monkeypatch.setattr(publisher, "publish", recording)
@@ -90,7 +90,7 @@ def test_a_failure_in_the_composed_system_gives_the_prebuilt_standby_then_the_re
     paths = _record_published(monkeypatch, planner, "_path_publisher")
     try:
         assert vehicle.stream(system, lambda: any(values["standby"] == "true" for values in vehicle.live))
-        assert planner._standby_messages is not None  # built when the standby verdict came, before any failure
+        assert planner.live.standby_messages is not None  # built when the standby verdict came, before any failure
         assert not trajectories and not paths
         assert vehicle.stream(system, lambda: len(vehicle.statuses) >= 2, engine_failed=True), vehicle.statuses
         first, refined = vehicle.statuses[0], vehicle.statuses[1]

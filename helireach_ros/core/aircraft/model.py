@@ -33,6 +33,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from enum import IntEnum
 from functools import lru_cache
 from typing import Any
 
@@ -57,6 +58,7 @@ __all__ = [
     "STATE_NAMES",
     "STATE_UNITS",
     "HelicopterState",
+    "StateIndex",
     "TrimCondition",
     "clip_rotor_speed_noise",
     "disturbed_dynamics_function",
@@ -72,6 +74,19 @@ __all__ = [
 ]
 
 STATE_NAMES = ("descent_rate", "forward_speed", "rotor_speed", "height", "distance", "engine_power")
+
+
+class StateIndex(IntEnum):
+    """The position of each component in the state vector (y, v, Ω, h, z, P) (:data:`STATE_NAMES`)."""
+
+    DESCENT_RATE = 0  # y, m/s, positive down
+    FORWARD_SPEED = 1  # v, m/s
+    ROTOR_SPEED = 2  # Ω, rad/s
+    HEIGHT = 3  # h, m
+    DISTANCE = 4  # z, m
+    ENGINE_POWER = 5  # P, W
+
+
 STATE_UNITS = ("m/s", "m/s", "rad/s", "m", "m", "W")
 CONTROL_NAMES = ("thrust_coefficient", "pitch_angle")
 DISTURBANCE_NAMES = ("descent_acceleration", "forward_acceleration", "rotor_acceleration")

@@ -9,9 +9,23 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
+from helireach_ros.core.estimation.disturbance import DisturbanceSettings
+from helireach_ros.core.policies.landing_supervisor import SupervisorSettings
+from helireach_ros.core.policies.live_reachability import LiveSettings
+from helireach_ros.core.workers.planner_backend import BackendSettings
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.parameter_table import parameter
+
+if TYPE_CHECKING:
+    from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings
+
+# The default solve_timeout: the deadline, but at least this. A kill is for a hung worker, not a slow one (a killed
+# worker is out for seconds while it rebuilds its NLPs): an unsafe failure plan for an estimated weight (plain CasADi
+# functions, 300 iterations) measured 1.05 s on an idle 2-core machine, over 1 s wherever the machine is loaded.
+_MIN_SOLVE_TIMEOUT_S = 3.0
+_NO_REPLANNING_PERIOD_S = 1e9  # replan_period 0 (re-planning off): the closed loop of the robust check flies one plan
 
 __all__ = ["PlannerParameters"]
 
@@ -70,3 +84,62 @@ class PlannerParameters:
         False, "verify each failure plan robustly in a low-priority process (the plan is published 'robust: pending')"
     )
     robust_uncertainty: str = parameter("", "uncertainty set of the robust verification ('' = config/uncertainty.yaml)")
+
+    # -- the core's settings, from these parameters ----------------------------------------------------------------
+    @property
+    def solve_timeout_s(self) -> float:
+        """The solve timeout in effect: not the deadline itself by default (a slow solve is not a hung one, and its
+        plan must still replace the deadline's fallback; a dead worker is seen at once whatever the timeout)."""
+        return max(self.deadline, _MIN_SOLVE_TIMEOUT_S) if math.isnan(self.solve_timeout) else self.solve_timeout
+
+    def supervisor_settings(self) -> SupervisorSettings:
+        """The failure-handling rules' settings."""
+        return SupervisorSettings(
+            deadline=self.deadline,
+            replan_min_height=self.replan_min_height,
+            replan_min_remaining=self.replan_min_remaining,
+            max_message_age=self.max_message_age,
+        )
+
+    def live_settings(self) -> LiveSettings | None:
+        """The live evaluation's settings (None: off)."""
+        if self.live_rate <= 0.0:
+            return None
+        return LiveSettings(
+            rate_hz=self.live_rate,
+            power_fraction=self.live_power_fraction,
+            max_state_age_s=self.live_max_state_age,
+            standby_max_age_s=self.standby_max_age,
+        )
+
+    def disturbance_settings(self) -> DisturbanceSettings | None:
+        """The re-plans' disturbance estimate (None: off)."""
+        return DisturbanceSettings(gain=self.disturbance_gain) if self.estimate_disturbance else None
+
+    def replanning_policy(self) -> ClosedLoopSettings:
+        """This node's re-planning policy as the closed loop flies it (what the robust verification checks)."""
+        from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings
+
+        return ClosedLoopSettings(
+            replan_period=self.replan_period if self.replan_period > 0.0 else _NO_REPLANNING_PERIOD_S,
+            min_height=self.replan_min_height,
+            min_remaining=self.replan_min_remaining,
+            estimate_disturbance=self.estimate_disturbance,
+            disturbance=DisturbanceSettings(gain=self.disturbance_gain),
+        )
+
+    def backend_settings(self) -> BackendSettings:
+        """How the node solves."""
+        return BackendSettings(
+            envelope_file=self.envelope_file,
+            solver_workers=self.solver_workers,
+            warm_up=self.warm_up,
+            solve_timeout_s=self.solve_timeout_s,
+            reaction_delay_s=self.reaction_delay,
+            estimate_weight=self.estimate_weight,
+            weight_window_s=self.weight_estimate_window,
+            weight_step=self.weight_estimate_step,
+            weight_error=self.weight_estimate_error,
+            robust_policy=self.replanning_policy() if self.robust_verification else None,
+            robust_uncertainty=self.robust_uncertainty,
+        )

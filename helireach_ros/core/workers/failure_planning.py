@@ -1,0 +1,299 @@
+"""The planning steps of a failure episode, without ROS: the first plan, the re-plans, the deadline's fallback.
+
+The planner node owns a :class:`FailurePlanner` and translates: an input or a timer becomes one of its calls, and
+what it decides to publish comes back through a :class:`PlanSink` (the node's publishers). The rules are the
+:class:`~helireach_ros.core.policies.landing_supervisor.LandingSupervisor`'s; the solves are the
+:class:`~helireach_ros.core.workers.planner_backend.PlannerBackend`'s. The steps run on the solver thread:
+
+- **the first plan** from the current state, warm-started from the envelope's nearest stored plan, for the episode's
+  gross weight (fixed when the failure starts: the last live evaluation's, or one a solver holds, so that the failure
+  path never builds an NLP). A solve that fails publishes the fallback when the supervisor says so; a safe plan's
+  robust verification and the disturbance estimate start after it is published (off the failure path);
+- **a re-plan** from the current state, from the control being flown at the state's stamp (the flyable controls stay
+  continuous), with no reaction delay, for the model plus what the last interval taught of its error
+  (:class:`~helireach_ros.core.estimation.disturbance.DisturbanceTracker`); a failed re-plan keeps the current plan;
+- **the deadline's fallback** when no plan is out in time (:func:`~helireach_ros.core.planning.fallback.fallback_plan`).
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable
+from typing import Any, Protocol
+
+import numpy as np
+
+from helireach_ros.core.aircraft.model import StateIndex
+from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker
+from helireach_ros.core.estimation.weight_tracking import WeightChoice, ready_choice
+from helireach_ros.core.policies.failure_episode import FailureEpisode
+from helireach_ros.core.policies.landing_supervisor import LandingSupervisor, ReplanGate
+from helireach_ros.core.policies.plan_status import PlannerHealth, SolverPoolHealth, StatusReport, planner_health_report
+from helireach_ros.core.policies.vehicle_readings import CurrentState, LatestReadings, RotorSource
+from helireach_ros.core.workers.live_scheduling import LiveScheduler
+from helireach_ros.core.workers.planner_backend import PlannerBackend
+
+__all__ = ["FailurePlanner", "PlanSink", "RobustKey", "controls_from_stamp"]
+
+RobustKey = tuple[int, int, int]
+"""A robust verification's key: (failure id, failure event stamp ns, plan state stamp ns)."""
+
+
+class PlanSink(Protocol):
+    """Where a :class:`FailurePlanner` publishes (the planner node's publishers)."""
+
+    def publish_plan(
+        self, failure: FailureEpisode, plan: Any, current: CurrentState, warm_source: str, *, replan: bool,
+        robust_pending: bool,
+    ) -> None:  # fmt: skip
+        """A converged plan (safe, unverified or unsafe), if the supervisor allows it."""
+
+    def publish_fallback(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, reason: str) -> None:
+        """The fallback for ``state``, if the supervisor allows it."""
+
+    def publish_no_plan(self, failure: FailureEpisode, text: str) -> None:
+        """A status without a plan (an error), if nothing is out yet."""
+
+    def robust_pending(self, key: RobustKey) -> None:
+        """A plan's robust verification was submitted."""
+
+    def report(self, level: str, text: str, throttle_s: float = 0.0) -> None:
+        """A line for the operator (``"info"``, ``"warning"``, ``"error"``), at most every ``throttle_s``."""
+
+
+def controls_from_stamp(plan: Any, stamp_ns: int) -> Callable[[float], np.ndarray]:
+    """A plan's controls as a function of time in seconds (the plan starts at its state's stamp)."""
+    start = stamp_ns * 1e-9
+    return lambda time: plan.controls_at([time - start])[:, 0]
+
+
+class FailurePlanner:
+    """A failure episode's planning steps (see the module docstring).
+
+    Args:
+        backend: the solvers (None: not configured; every step then says so).
+        setup_error: why there is no backend.
+        supervisor: the failure-handling rules.
+        readings: the latest vehicle readings.
+        sink: where plans and statuses go.
+        clock_ns: now, ns.
+        zero_power: plan with zero engine power (a total power loss) rather than the measured power.
+        disturbance: the re-plans' disturbance estimate (None: off).
+    """
+
+    def __init__(
+        self,
+        backend: PlannerBackend | None,
+        setup_error: str,
+        supervisor: LandingSupervisor,
+        readings: LatestReadings | None,
+        sink: PlanSink,
+        clock_ns: Callable[[], int],
+        *,
+        zero_power: bool,
+        disturbance: DisturbanceSettings | None,
+    ) -> None:
+        self.backend = backend
+        self.setup_error = setup_error
+        self.supervisor = supervisor
+        self.readings = readings
+        self._sink = sink
+        self._clock_ns = clock_ns
+        self._zero_power = zero_power
+        self._disturbance = disturbance
+        self._lock = threading.Lock()
+        self._episode_weight: WeightChoice | None = None
+
+    @property
+    def not_configured(self) -> str:
+        """The status text of a planner that cannot plan."""
+        return f"planner not configured ({self.setup_error})"
+
+    def current(self) -> CurrentState | None:
+        """The state to plan a failure from now (None: no fresh state)."""
+        if self.readings is None:
+            return None
+        return self.readings.current(self._clock_ns(), zero_power=self._zero_power)
+
+    # -- the episode's weight -----------------------------------------------------------------------------------
+    def fix_weight(self, latest: WeightChoice | None) -> None:
+        """Fixes the episode's gross weight at its start: the last live evaluation's ``latest`` (no estimate in the
+        failure callback), or one a solver holds (never an NLP built in the failure path)."""
+        backend = self.backend
+        if backend is None:
+            return
+        why = backend.weights_off_reason if backend.weights is None else "no live evaluation yet (where NLPs are built)"
+        configured = backend.airframe.gross_weight
+        latest = latest or WeightChoice(configured, "file", 0.0, why)
+        with self._lock:
+            self._episode_weight = ready_choice(latest, configured, backend.ready_weights())
+
+    @property
+    def episode_weight(self) -> WeightChoice:
+        """The gross weight the current (or last) failure episode plans for (the file's before any failure)."""
+        with self._lock:
+            weight = self._episode_weight
+        if weight is not None:
+            return weight
+        configured = self.backend.airframe.gross_weight if self.backend is not None else float("nan")
+        return WeightChoice(configured, "file", 0.0, "no failure")
+
+    # -- the steps ----------------------------------------------------------------------------------------------
+    def solve(
+        self,
+        state: np.ndarray,
+        warm_start: Any,
+        initial_control: np.ndarray | None = None,
+        reaction_delay_s: float | None = None,
+        disturbance: np.ndarray | None = None,
+    ) -> tuple[Any | None, str]:
+        """A failure plan or re-plan for the episode's weight (blocking): (plan, "") or (None, why not)."""
+        if self.backend is None:
+            return None, self.not_configured
+        return self.backend.solve(
+            state, warm_start, gross_weight=self.episode_weight.gross_weight, initial_control=initial_control,
+            reaction_delay_s=reaction_delay_s, disturbance=disturbance,
+        )  # fmt: skip
+
+    def first_plan(self, failure: FailureEpisode, retry: bool = False) -> None:
+        """The first plan of a failure (see the module docstring). ``retry``: called again because no converged plan
+        is out yet; a fallback already out is not repeated."""
+        if not failure.active:
+            return
+        current = self.current()
+        if current is None:
+            self._sink.publish_no_plan(failure, "no valid vehicle state at the failure: waiting for one")
+            return
+        state, stamp_ns = current.state, current.stamp_ns
+        envelope = self.backend.envelope if self.backend is not None else None
+        stored = (
+            envelope.nearest_plan(
+                state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED], -state[StateIndex.DESCENT_RATE]
+            )
+            if envelope is not None
+            else None
+        )
+        warm_start, source = (stored.warm_start, "envelope") if stored is not None else (None, "none")
+        plan, error = self.solve(state, warm_start)
+        if plan is None or not plan.solver.success:
+            reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
+            self._sink.report("error", f"failure #{failure.failure_id}: no converged plan ({reason})")
+            if self.supervisor.fallback_after_failed_solve(failure, retry=retry, stamp_ns=stamp_ns):
+                self.publish_fallback(failure, state, stamp_ns, reason)
+            return
+        robust = self.backend is not None and self.backend.robust is not None and plan.safe
+        self._sink.publish_plan(failure, plan, current, source, replan=False, robust_pending=robust)
+        if robust:  # after publishing: off the failure path
+            self._submit_robust(failure, plan, stamp_ns)
+        if self._disturbance is not None and failure.disturbance is None:  # after publishing: off the failure path
+            assert self.backend is not None  # a plan came from it
+            model = self.backend.model_for(self.episode_weight.gross_weight)
+            failure.disturbance = DisturbanceTracker(model, self._disturbance)
+            failure.disturbance.update(stamp_ns * 1e-9, state, controls_from_stamp(plan, stamp_ns))  # 1st interval
+
+    def _submit_robust(self, failure: FailureEpisode, plan: Any, stamp_ns: int) -> None:
+        """Queues the plan's robust verification (its verdict is pending until it comes back)."""
+        assert self.backend is not None and self.backend.robust is not None  # called only with robust verification
+        key = (failure.failure_id, failure.event_stamp_ns, stamp_ns)
+        model = self.backend.model_for(self.episode_weight.gross_weight)
+        self.backend.robust.submit(key, model, self.backend.robust_settings(), plan)
+        self._sink.robust_pending(key)
+
+    def replan(self, failure: FailureEpisode) -> None:
+        """One closed-loop re-plan from the current state, warm-started from the current plan."""
+        current = self.current()
+        if current is None:
+            return
+        state, stamp_ns = current.state, current.stamp_ns
+        decision = self.supervisor.replan_decision(
+            failure,
+            rotor_measured=current.rotor_source is RotorSource.MEASURED,
+            height=state[StateIndex.HEIGHT],
+            stamp_ns=stamp_ns,
+        )
+        if decision is None or decision.previous is None:
+            return
+        if decision.gate is ReplanGate.PAUSE_NO_ROTOR:
+            self._sink.report(
+                "warning",
+                f"failure #{failure.failure_id}: re-planning paused: no measured rotor speed (the current plan is "
+                f"kept; {failure.replans_skipped_no_rotor} re-plans skipped)",
+                throttle_s=1.0,
+            )
+            return
+        if decision.gate is ReplanGate.END_CLOSED_LOOP:
+            self._sink.report(
+                "info",
+                f"failure #{failure.failure_id}: closed loop ends at {state[StateIndex.HEIGHT]:.2f} m, "
+                f"{decision.remaining:.2f} s to go ({failure.replans} re-plans, {failure.replans_failed} failed)",
+            )
+            return
+        previous = decision.previous
+        flying = previous.plan.controls_at([(stamp_ns - previous.stamp_ns) * 1e-9])[:, 0]
+        # what the last interval taught of the model's error (the current plan's controls were flown in it)
+        flown = controls_from_stamp(previous.plan, previous.stamp_ns)
+        tracker = failure.disturbance
+        disturbance = tracker.update(stamp_ns * 1e-9, state, flown) if tracker is not None else None
+        plan, error = self.solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
+        converged = plan is not None and plan.solver.success
+        self.supervisor.replan_solved(failure, converged=converged)
+        if not converged:
+            reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
+            self._sink.report("warning", f"re-plan failed ({reason}); keeping the current plan", throttle_s=1.0)
+            return
+        self._sink.publish_plan(failure, plan, current, "previous_plan", replan=True, robust_pending=False)
+
+    def deadline(self) -> None:
+        """The deadline's fallback, if it is due now (once per failure)."""
+        failure = self.supervisor.deadline_fallback_due(self._clock_ns())
+        if failure is None:
+            return
+        deadline = self.supervisor.settings.deadline
+        current = self.current()
+        if current is None:
+            self._sink.publish_no_plan(failure, f"no plan within {deadline:g} s and no valid state")
+            return
+        self.publish_fallback(failure, current.state, current.stamp_ns, f"no plan within the {deadline:g} s deadline")
+
+    def publish_fallback(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, reason: str) -> None:
+        """Publishes the fallback for ``state``, or says that there is none."""
+        if self.backend is None:
+            self._sink.publish_no_plan(failure, f"{reason}; no fallback available ({self.not_configured})")
+            return
+        self._sink.publish_fallback(failure, state, stamp_ns, reason)
+
+    # -- health -------------------------------------------------------------------------------------------------
+    def health_report(self, live: LiveScheduler | None, *, solving: bool, solve_timeout_s: float) -> StatusReport:
+        """The planner's ``/diagnostics`` status: its solvers, envelope, weight, live evaluation and failure."""
+        backend = self.backend
+        if backend is None:
+            return StatusReport("ERROR", f"not configured: {self.setup_error}", {})
+        pool = backend.pool
+        failure = self.supervisor.failure
+        asked = failure is not None and failure.active and failure.replans_skipped_no_rotor
+        current = self.current() if asked else None
+        health = PlannerHealth(
+            airframe=backend.airframe.name,
+            method=backend.settings.method,
+            startup_s=backend.startup_s,
+            warm_up_ms=backend.warm_up_ms,
+            envelope_note=backend.envelope_note,
+            has_envelope=backend.envelope is not None,
+            failures=self.supervisor.failure_count,
+            solving=solving,
+            episode_phase=self.supervisor.episode.phase.value,
+            solve_timeout_s=solve_timeout_s,
+            ready_weights=len(backend.ready_weights()),
+            weight_now=backend.weight_now(self._clock_ns()),
+            airframe_problems=tuple(backend.airframe_problems),
+            pool=None
+            if pool is None
+            else SolverPoolHealth(
+                pool.pool_settings.workers, pool.ready_workers, pool.busy_workers, pool.restarts, pool.last_error
+            ),
+            rotor_measured=None if current is None else current.rotor_source is RotorSource.MEASURED,
+        )
+        if live is None:
+            return planner_health_report(health, None, failure)
+        with live.lock:
+            return planner_health_report(health, live.evaluator, failure)

@@ -1,0 +1,207 @@
+"""Live evaluation before a failure, scheduled on the planner's solvers: "if the engine failed now, could we land?"
+
+At ``live_rate`` the planner solves the landing from the current state as if the engine failed now
+(:class:`~helireach_ros.core.policies.live_reachability.LiveEvaluator`: the warm start, the verdict, the standby
+plan). :class:`LiveScheduler` decides when one starts and where it runs, and keeps what belongs to the verdict:
+
+- one evaluation in flight at a time, due half a period early (a timer's jitter must not skip a period); only from a
+  state with a measured rotor speed (a verdict for an assumed Ω₀ would answer for a state nobody measured);
+- with a solver pool the evaluation is a live-priority job there, else it runs on the solver thread only when no
+  failure step is pending or running;
+- the envelope's nearest plan is the warm start only when no neighbouring live solution can start it;
+- the weight it was made for (a weight no solver holds is built here, before any failure) and, for the standby
+  verdict, its vehicle frame and its messages, prepared off the executor when the verdict comes, so that a failure
+  only publishes them;
+- a generation number: a verdict that comes back after a failure started or after a reset is not evidence any more
+  and is dropped.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+from helireach_ros.core.aircraft.model import StateIndex
+from helireach_ros.core.estimation.weight_tracking import WeightChoice
+from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
+from helireach_ros.core.policies.plan_status import StatusReport, live_report
+from helireach_ros.core.policies.vehicle_readings import CurrentState, RotorSource
+from helireach_ros.core.workers.planner_backend import PlannerBackend
+from helireach_ros.core.workers.solver_thread import SolverThread
+
+__all__ = ["LiveScheduler", "StandbyPlan"]
+
+
+@dataclass(frozen=True)
+class StandbyPlan:
+    """The latest safe live verdict handed to a failure: its plan is published at once, flagged ``standby``.
+
+    Attributes:
+        verdict: the live verdict (its plan, its state's stamp).
+        frame: the vehicle frame of its state.
+        weight: the gross weight it was made for.
+        messages: its messages as prepared when the verdict came (None: not yet; opaque here).
+    """
+
+    verdict: LiveVerdict
+    frame: str
+    weight: WeightChoice
+    messages: Any
+
+
+class LiveScheduler:
+    """When and where live evaluations run, and what their verdicts carry (see the module docstring).
+
+    Args:
+        settings: the live policy.
+        backend: the solvers, the envelope and the weight.
+        solver_thread: where an evaluation runs without a solver pool.
+        clock_ns: now, ns (the node's clock).
+        publish_verdict: called with each verdict's status report (under the scheduler's lock, so that no verdict is
+            published after a pause).
+        prepare_standby: ``prepare_standby(plan, stamp_ns, frame)`` builds a standby verdict's messages (called off
+            the lock, on the thread the verdict came back on).
+    """
+
+    def __init__(
+        self,
+        settings: LiveSettings,
+        backend: PlannerBackend,
+        solver_thread: SolverThread,
+        clock_ns: Callable[[], int],
+        publish_verdict: Callable[[StatusReport], None],
+        prepare_standby: Callable[[Any, int, str], Any],
+    ) -> None:
+        self.settings = settings
+        self.evaluator = LiveEvaluator(settings)
+        self._backend = backend
+        self._solver_thread = solver_thread
+        self._clock_ns = clock_ns
+        self._publish_verdict = publish_verdict
+        self._prepare_standby = prepare_standby
+        self._lock = threading.Lock()
+        self._job: Future | None = None
+        self._generation = 0
+        self._standby_frame = ""
+        self._standby_weight: WeightChoice | None = None
+        self._standby_messages: Any = None
+        self.latest_weight: WeightChoice | None = None  # the weight the latest evaluation was started for
+
+    @property
+    def lock(self) -> threading.Lock:
+        """Held while a verdict is recorded and published (a reader of the evaluator's counters takes it too)."""
+        return self._lock
+
+    @property
+    def standby_messages(self) -> Any:
+        """The standby verdict's prepared messages (None: none yet)."""
+        with self._lock:
+            return self._standby_messages
+
+    def tick(self, current: CurrentState | None) -> None:
+        """Starts an evaluation of ``current`` if one is due and none is in flight."""
+        if current is None or current.rotor_source is not RotorSource.MEASURED:
+            return  # no verdict from an assumed rotor speed: the latched one ages and says so (state_age_s)
+        now_ns = self._clock_ns()
+        state = current.state
+        with self._lock:
+            if self._job is not None and not self._job.done():
+                return
+            if not self.evaluator.due(now_ns + self.settings.period_ns // 2):
+                return
+            # The envelope's nearest plan (~2 ms in the 3-D file) only when no neighbouring live solution can start it.
+            envelope = self._backend.envelope
+            stored = None
+            if envelope is not None and not self.evaluator.warm_start_applies(state):
+                stored = envelope.nearest_plan(
+                    state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED], -state[StateIndex.DESCENT_RATE]
+                )
+            prepared = self.evaluator.prepare(
+                state, current.stamp_ns, now_ns, stored.warm_start if stored is not None else None
+            )
+            if prepared is None:
+                return  # the state is older than live_max_state_age
+            failure_now, warm_start = prepared
+            weight = self._backend.weight_now(now_ns)  # a weight no solver holds yet is built here, before any failure
+            self.latest_weight = weight
+            done = partial(self._done, self._generation, failure_now, current.stamp_ns, current.frame, now_ns, weight)
+            if self._backend.pool is not None:
+                try:
+                    job = self._backend.submit_live(failure_now, warm_start, weight.gross_weight)
+                except RuntimeError:  # the pool is closed: the node is being destroyed
+                    return
+                self._job = job
+        if self._backend.pool is not None:
+            job.add_done_callback(done)  # outside the lock: a job already done calls back at once, here
+            return
+        self._solver_thread.submit(self._solve_in_process, done, failure_now, warm_start, weight)
+
+    def _solve_in_process(
+        self, done: Callable[[Future], None], state: np.ndarray, warm_start: Any, weight: WeightChoice
+    ) -> None:
+        """Without a pool: the live solve on the solver thread (the cold check, as in the workers)."""
+        future: Future = Future()
+        try:
+            future.set_result(self._backend.solve_live(state, warm_start, weight.gross_weight))
+        except (ValueError, RuntimeError) as error:
+            future.set_exception(error)
+        done(future)
+
+    def _done(
+        self,
+        generation: int,
+        state: np.ndarray,
+        stamp_ns: int,
+        frame: str,
+        started_ns: int,
+        weight: WeightChoice,
+        future: Future,
+    ) -> None:
+        """Records a finished evaluation and publishes its verdict (on the pool's or the solver thread)."""
+        try:
+            plan, error = future.result(), ""
+        except Exception as exception:  # a refused state, a dead or hung worker, a closed pool: an error verdict
+            plan, error = None, f"{type(exception).__name__}: {exception}"
+        with contextlib.suppress(Exception):  # the node may be shutting down
+            with self._lock:
+                if generation != self._generation:
+                    return  # a failure started (or the evaluator was reset) meanwhile: not evidence any more
+                verdict = self.evaluator.record(state, stamp_ns, started_ns, self._clock_ns(), plan, error)
+                standby = self.evaluator.standby_verdict is verdict
+                if standby:
+                    self._standby_frame, self._standby_weight = frame, weight
+                report = live_report(
+                    verdict,
+                    standby=standby,
+                    weight=weight,
+                    configured_weight=self._backend.airframe.gross_weight,
+                    power_fraction=self.settings.power_fraction,
+                    now_ns=self._clock_ns(),
+                )
+                self._publish_verdict(report)
+            if standby:  # its messages now, off the executor and outside the lock: the failure only publishes them
+                messages = self._prepare_standby(verdict.plan, stamp_ns, frame)
+                with self._lock:
+                    if generation == self._generation:
+                        self._standby_messages = messages
+
+    def pause(self, failure_stamp_ns: int | None = None) -> StandbyPlan | None:
+        """Drops the evaluation in flight; with a failure's stamp returns its standby plan (if any), without one
+        forgets every verdict (evaluation resumes afresh)."""
+        with self._lock:
+            self._generation += 1
+            self._job = None
+            if failure_stamp_ns is None:
+                self.evaluator.reset()
+                return None
+            verdict = self.evaluator.standby(failure_stamp_ns)
+            if verdict is None or self._standby_weight is None:
+                return None
+            return StandbyPlan(verdict, self._standby_frame, self._standby_weight, self._standby_messages)
