@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
@@ -178,7 +179,9 @@ def run_demo(
             result.standby_plan = standby[0] if standby else None
             converged = [record for record in result.plans if not record.fallback and not planner.is_standby(record)]
             result.first_plan = converged[0] if converged else (result.plans[0] if result.plans else None)
-            result.track = np.array([[state[3], state[1]] for _, state in sim.vehicle.history])
+            result.track = np.array(
+                [[state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED]] for _, state in sim.vehicle.history]
+            )
             if hold and not system.stop_requested:
                 print("helireach demo: holding the nodes after touchdown; Ctrl-C to end", flush=True)
                 system.spin_until(lambda: False, math.inf, step_s=0.1)

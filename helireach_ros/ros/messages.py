@@ -37,6 +37,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool, Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.flight.simulation import piecewise_linear_controls
 from helireach_ros.core.policies.vehicle_readings import OdometryReading, RotorReading
 from helireach_ros.core.status_values import format_value
@@ -364,8 +365,8 @@ def path_message(
         pose = PoseStamped()
         pose.header.stamp = stamp_message(stamp_ns + round(time * 1e9))
         pose.header.frame_id = frame_id
-        pose.pose.position.x = float(states[4, k])
-        pose.pose.position.z = float(states[3, k])
+        pose.pose.position.x = float(states[StateIndex.DISTANCE, k])
+        pose.pose.position.z = float(states[StateIndex.HEIGHT, k])
         pose.pose.orientation = pitch_quaternion(float(pitch[k]) if pitch is not None else 0.0)
         poses.append(pose)
     message.poses = poses

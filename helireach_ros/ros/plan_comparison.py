@@ -165,7 +165,7 @@ def compare_logged_plans(
     comparisons = []
     for values, trajectory in pairs:
         state = np.array([float(values[key]) for key in _STATE_KEYS])
-        stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope is not None else None
+        stored = envelope.nearest_plan_to(state) if envelope is not None else None
         # the control flown at the plan's start and its reaction delay, as logged (older logs: the defaults)
         thrust, pitch = values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")
         control = None if thrust is None or pitch is None else np.array([float(thrust), float(pitch)])

@@ -33,7 +33,6 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-from enum import IntEnum
 from functools import lru_cache
 from typing import Any
 
@@ -48,6 +47,7 @@ from helireach_ros.core.aircraft.inflow import (
     momentum_root_residual,
 )
 from helireach_ros.core.aircraft.smooth import smooth_positive
+from helireach_ros.core.aircraft.state_index import StateIndex
 
 __all__ = [
     "CONTROL_NAMES",
@@ -58,7 +58,6 @@ __all__ = [
     "STATE_NAMES",
     "STATE_UNITS",
     "HelicopterState",
-    "StateIndex",
     "TrimCondition",
     "clip_rotor_speed_noise",
     "disturbed_dynamics_function",
@@ -74,17 +73,6 @@ __all__ = [
 ]
 
 STATE_NAMES = ("descent_rate", "forward_speed", "rotor_speed", "height", "distance", "engine_power")
-
-
-class StateIndex(IntEnum):
-    """The position of each component in the state vector (y, v, Ω, h, z, P) (:data:`STATE_NAMES`)."""
-
-    DESCENT_RATE = 0  # y, m/s, positive down
-    FORWARD_SPEED = 1  # v, m/s
-    ROTOR_SPEED = 2  # Ω, rad/s
-    HEIGHT = 3  # h, m
-    DISTANCE = 4  # z, m
-    ENGINE_POWER = 5  # P, W
 
 
 STATE_UNITS = ("m/s", "m/s", "rad/s", "m", "m", "W")
@@ -151,7 +139,7 @@ class HelicopterState:
 
 def _rotor_speeds(airframe: Airframe, state, control):
     """v_h = ΩR √(C_T/2) (C_T guarded), U_T and U_P: what the induced velocity depends on, m/s."""
-    y, v, rotor_speed = state[0], state[1], state[2]
+    y, v, rotor_speed = state[StateIndex.DESCENT_RATE], state[StateIndex.FORWARD_SPEED], state[StateIndex.ROTOR_SPEED]
     thrust_coefficient, pitch = control[0], control[1]
     hover_induced_velocity = rotor_speed * airframe.rotor_radius * ca.sqrt(
         smooth_positive(thrust_coefficient, _THRUST_GUARD) / 2.0
@@ -174,7 +162,7 @@ def _rotor_terms(airframe: Airframe, state, control, momentum_roots=None):
     The paper's model (κ = 1, K = 0, ν = ΩR √(C_T/2)) is built as the paper writes it. ``momentum_roots``: see
     :func:`~helireach_ros.core.aircraft.inflow.induced_velocity`.
     """
-    rotor_speed, height = state[2], state[3]
+    rotor_speed, height = state[StateIndex.ROTOR_SPEED], state[StateIndex.HEIGHT]
     thrust_coefficient = control[0]
     rotor_model = airframe.rotor_model
     density = airframe.air_density
@@ -186,7 +174,8 @@ def _rotor_terms(airframe: Airframe, state, control, momentum_roots=None):
     guarded_tip_speed = smooth_positive(rotor_speed, _ROTOR_GUARD_RATIO * airframe.nominal_rotor_speed) * (
         airframe.rotor_radius
     )
-    axial_speed = state[1] * ca.sin(control[1]) - state[0] * ca.cos(control[1])
+    descent_rate, forward_speed = state[StateIndex.DESCENT_RATE], state[StateIndex.FORWARD_SPEED]
+    axial_speed = forward_speed * ca.sin(control[1]) - descent_rate * ca.cos(control[1])
     profile = airframe.rotor_solidity * airframe.blade_drag_coefficient / 8.0
     if rotor_model.is_paper:
         inflow_ratio = (axial_speed + hover_induced_velocity) / guarded_tip_speed
@@ -387,9 +376,9 @@ def trim_controls(airframe: Airframe, state) -> np.ndarray:
     trim at the same speed (clipped to ≥ 0) stands in: the nearest steady flight the aircraft could have been in.
     """
     state = np.asarray(state, dtype=float).reshape(-1)
-    speed = max(float(state[1]), 0.0)
+    speed = max(float(state[StateIndex.FORWARD_SPEED]), 0.0)
     try:
-        trim = trim_flight(airframe, speed, -float(state[0]))
+        trim = trim_flight(airframe, speed, -float(state[StateIndex.DESCENT_RATE]))
     except ValueError:
         trim = trim_level_flight(airframe, speed)
     return np.array([trim.thrust_coefficient, trim.pitch_angle])

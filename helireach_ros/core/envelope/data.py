@@ -73,6 +73,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.resources import data_path, source_root
 from helireach_ros.core.units import FT, KT
@@ -695,6 +696,12 @@ class Envelope:
         distance[~usable] = np.inf
         index, row, column = np.unravel_index(int(np.argmin(distance)), distance.shape)
         return self.stored_plan(int(row), int(column), int(index))
+
+    def nearest_plan_to(self, state: np.ndarray) -> StoredPlan | None:
+        """:meth:`nearest_plan` for a model state (y, v, Ω, h, z, P; SI): its height, speed and climb rate −y."""
+        state = np.asarray(state, dtype=float).reshape(-1)
+        height, speed = state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED]
+        return self.nearest_plan(height, speed, -state[StateIndex.DESCENT_RATE])
 
     def has_stored_plan(self, row: int, column: int, climb_index: int = 0) -> bool:
         """Whether node (row, column) [of climb slice ``climb_index``] stores a plan that can warm-start a solve and

@@ -36,6 +36,7 @@ import numpy as np
 
 from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.aircraft.model import NO_DISTURBANCE, STATE_NAMES, disturbed_dynamics_function
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.evidence.flyability import FlyabilityReport, check_flyability
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.ocp.transcription.base import DecodedPlan, terminal_cost
@@ -260,7 +261,7 @@ def replay_plan(
         times.extend(grid.tolist())
         states.extend(outputs.T)
         state = outputs[:, -1]
-        if state[3] < -clearance or not np.all(np.isfinite(state)):
+        if state[StateIndex.HEIGHT] < -clearance or not np.all(np.isfinite(state)):
             break
     times_array = np.asarray(times)
     states_array = np.asarray(states).T

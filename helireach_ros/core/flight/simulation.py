@@ -37,6 +37,7 @@ import yaml
 
 from helireach_ros.core.aircraft.airframe import Airframe, ConfigError, load_airframe
 from helireach_ros.core.aircraft.model import trim_level_flight
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.evidence.replay import segment_integrator, segment_parameters
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.ocp.transcription.base import terminal_cost
@@ -495,11 +496,11 @@ class SimulatedVehicle:
 
     def _cruise_until(self, end: float) -> None:
         # Level trim is an equilibrium of the true airframe with the engine holding power: only z moves.
-        self.state[4] += self.state[1] * (end - self.time)
+        self.state[StateIndex.DISTANCE] += self.state[StateIndex.FORWARD_SPEED] * (end - self.time)
         self.time = end
         if self.time >= self.scenario.failure_time:
             self.phase = "autorotation"
-            self.state[5] = self.scenario.power_fraction * self.trim.power
+            self.state[StateIndex.ENGINE_POWER] = self.scenario.power_fraction * self.trim.power
             self._note_sample(self.state)
         self.history.append((self.time, self.state.copy()))
 
@@ -532,11 +533,13 @@ class SimulatedVehicle:
             if not np.all(np.isfinite(state)):
                 self._finish("the vehicle state became non-finite")
                 return
-            if state[3] <= 0.0:  # contact between the previous sample and this one: interpolate to h = 0
-                fraction = self.state[3] / (self.state[3] - state[3])
+            if (
+                state[StateIndex.HEIGHT] <= 0.0
+            ):  # contact between the previous sample and this one: interpolate to h = 0
+                fraction = self.state[StateIndex.HEIGHT] / (self.state[StateIndex.HEIGHT] - state[StateIndex.HEIGHT])
                 self.time += fraction * (float(time) - self.time)
                 self.state = self.state + fraction * (state - self.state)
-                self.state[3] = 0.0
+                self.state[StateIndex.HEIGHT] = 0.0
                 self._note_sample(self.state)
                 self._finish("")
                 return
@@ -546,12 +549,15 @@ class SimulatedVehicle:
 
     def _note_sample(self, state: np.ndarray) -> None:
         """Tracks Ω in flight: from the failure until the vehicle is in the touchdown set (J ≤ 0), and until contact."""
-        self._rotor_low_to_contact = min(self._rotor_low_to_contact, float(state[2]))
+        self._rotor_low_to_contact = min(self._rotor_low_to_contact, float(state[StateIndex.ROTOR_SPEED]))
         if self._in_touchdown_set:
             return
-        self._rotor_range = (min(self._rotor_range[0], float(state[2])), max(self._rotor_range[1], float(state[2])))
-        if state[3] >= self.nominal_airframe.flyability.commit_height:
-            self._rotor_low_above_commit = min(self._rotor_low_above_commit, float(state[2]))
+        self._rotor_range = (
+            min(self._rotor_range[0], float(state[StateIndex.ROTOR_SPEED])),
+            max(self._rotor_range[1], float(state[StateIndex.ROTOR_SPEED])),
+        )
+        if state[StateIndex.HEIGHT] >= self.nominal_airframe.flyability.commit_height:
+            self._rotor_low_above_commit = min(self._rotor_low_above_commit, float(state[StateIndex.ROTOR_SPEED]))
         self._in_touchdown_set = bool(terminal_cost(self.nominal_airframe, state) <= 0.0)
 
     def _finish(self, reason: str) -> None:
@@ -571,16 +577,17 @@ class SimulatedVehicle:
         value = float(terminal_cost(self.nominal_airframe, self.state)) if not reason else math.inf
         if not reason and value > 0.0:
             reason = (
-                f"touchdown at {self.state[0] / FT:.1f} ft/s and {self.state[1] / KT:.1f} kt exceeds the limits "
+                f"touchdown at {self.state[StateIndex.DESCENT_RATE] / FT:.1f} ft/s and "
+                f"{self.state[StateIndex.FORWARD_SPEED] / KT:.1f} kt exceeds the limits "
                 f"({limits.max_descent_rate / FT:.1f} ft/s, {limits.max_forward_speed / KT:.1f} kt)"
             )
         if not reason and not rotor_ok:
             reason = f"rotor speed left its limits in flight ({100 * low / omega0:.1f}-{100 * high / omega0:.1f} %)"
         self.touchdown = TouchdownReport(
             time_after_failure=self.time - self.scenario.failure_time,
-            descent_rate=float(self.state[0]),
-            forward_speed=float(self.state[1]),
-            rotor_speed=float(self.state[2]),
+            descent_rate=float(self.state[StateIndex.DESCENT_RATE]),
+            forward_speed=float(self.state[StateIndex.FORWARD_SPEED]),
+            rotor_speed=float(self.state[StateIndex.ROTOR_SPEED]),
             min_rotor_speed=low,
             max_rotor_speed=high,
             value=value,

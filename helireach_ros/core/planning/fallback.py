@@ -18,6 +18,7 @@ import numpy as np
 
 from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.aircraft.model import steady_autorotation
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.units import FT, KT
 
@@ -56,7 +57,7 @@ def fallback_plan(
         settings: the planner's settings (for the longest landing time).
         envelope: a loaded :class:`~helireach_ros.core.envelope.data.Envelope` matching the planner, or None.
     """
-    stored = envelope.nearest_plan(state[3], state[1], -state[0]) if envelope is not None else None
+    stored = envelope.nearest_plan_to(state) if envelope is not None else None
     if stored is not None:
         return FallbackPlan(
             "envelope_plan",
@@ -67,9 +68,9 @@ def fallback_plan(
             stored.control_interpolation,
             stored.status,
         )
-    speed = float(np.clip(state[1], 0.0, 60.0))
+    speed = float(np.clip(state[StateIndex.FORWARD_SPEED], 0.0, 60.0))
     descent_rate, thrust_coefficient, pitch = steady_autorotation(airframe, speed)
-    duration = float(np.clip(state[3] / max(descent_rate, 1.0), 1.0, settings.max_time_to_land))
+    duration = float(np.clip(state[StateIndex.HEIGHT] / max(descent_rate, 1.0), 1.0, settings.max_time_to_land))
     return FallbackPlan(
         "autorotation_entry",
         f"steady autorotation entry at {speed / KT:.0f} kt (C_T {thrust_coefficient:.4f}, pitch "

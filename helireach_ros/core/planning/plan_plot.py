@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.planning.planner import LandingPlan
 from helireach_ros.core.units import FT, KT
 
@@ -68,8 +69,8 @@ def plot_landing_plan(plan: LandingPlan, out_path: str | Path, title: str | None
         panel.grid(alpha=0.3)
 
     if title is None:
-        height_ft = plan.initial_state[3] / FT
-        speed_kt = plan.initial_state[1] / KT
+        height_ft = plan.initial_state[StateIndex.HEIGHT] / FT
+        speed_kt = plan.initial_state[StateIndex.FORWARD_SPEED] / KT
         touchdown = replay.touchdown_state
         title = (
             f"{height_ft:.0f} ft, {speed_kt:.0f} kt — {plan.status.upper()} ({plan.method}), "

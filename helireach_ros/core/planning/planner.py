@@ -29,6 +29,7 @@ from helireach_ros.core.aircraft.model import (
     HelicopterState,
     trim_controls,
 )
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.evidence.replay import (
     ReplaySummary,
     control_function,
@@ -237,14 +238,15 @@ def _validate_state(state: np.ndarray, airframe: Airframe) -> None:
     bad = [name for name, value in zip(STATE_NAMES, state, strict=True) if not np.isfinite(value)]
     if bad:
         raise ValueError(f"state is not finite in: {', '.join(bad)}")
-    if state[3] < -airframe.limits.ground_clearance:
+    if state[StateIndex.HEIGHT] < -airframe.limits.ground_clearance:
         raise ValueError(
-            f"height {state[3]:.2f} m is below the ground clearance (-{airframe.limits.ground_clearance} m)"
+            f"height {state[StateIndex.HEIGHT]:.2f} m is below the ground clearance "
+            f"(-{airframe.limits.ground_clearance} m)"
         )
-    if state[2] <= 0.0:
-        raise ValueError(f"rotor speed must be positive, got {state[2]!r} rad/s")
-    if state[5] < 0.0:
-        raise ValueError(f"engine power must be >= 0, got {state[5]!r} W")
+    if state[StateIndex.ROTOR_SPEED] <= 0.0:
+        raise ValueError(f"rotor speed must be positive, got {state[StateIndex.ROTOR_SPEED]!r} rad/s")
+    if state[StateIndex.ENGINE_POWER] < 0.0:
+        raise ValueError(f"engine power must be >= 0, got {state[StateIndex.ENGINE_POWER]!r} W")
 
 
 class LandingPlanner:
@@ -408,8 +410,8 @@ class LandingPlanner:
         states, e.g. 300 iterations at h = 0 in the descending slices of the envelope); the replay judges it."""
         return bool(
             self.settings.method == "flyable"
-            and state[3] <= -self.airframe.limits.ground_clearance
-            and state[0] >= 0.0
+            and state[StateIndex.HEIGHT] <= -self.airframe.limits.ground_clearance
+            and state[StateIndex.DESCENT_RATE] >= 0.0
             and terminal_cost(self.airframe, state) > 0.0
         )
 

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.planning.planner import ControlFunctionWarmStart, LandingPlan, WarmStart
 
 __all__ = [
@@ -136,7 +137,7 @@ def failure_now_state(measured_state: np.ndarray, power_fraction: float) -> np.n
     state = np.array(measured_state, dtype=float).reshape(-1)
     if state.shape != (6,):
         raise ValueError(f"a helicopter state has 6 components, got shape {state.shape}")
-    state[5] = power_fraction * max(state[5], 0.0)
+    state[StateIndex.ENGINE_POWER] = power_fraction * max(state[StateIndex.ENGINE_POWER], 0.0)
     return state
 
 
@@ -145,6 +146,7 @@ def failure_now_state(measured_state: np.ndarray, power_fraction: float) -> np.n
 # elsewhere, a sensor reset) starts cold or from the envelope, because a far warm start ends in worse local optima
 # (measured: warm from 20 ft / 90 kt, the plan from 600 ft / 20 kt had J = -0.21; cold, J = -0.36).
 WARM_START_NEIGHBOURHOOD = np.array([5.0, 10.0, 30.0])
+_NEIGHBOURHOOD_COMPONENTS = [StateIndex.DESCENT_RATE, StateIndex.FORWARD_SPEED, StateIndex.HEIGHT]
 
 
 class LiveEvaluator:
@@ -183,7 +185,10 @@ class LiveEvaluator:
         made from a state within :data:`WARM_START_NEIGHBOURHOOD` of this one (a fallback is then not needed)."""
         if self._warm_start is None or self._warm_state is None:
             return False
-        change = np.abs(np.asarray(measured_state, dtype=float).reshape(-1)[[0, 1, 3]] - self._warm_state[[0, 1, 3]])
+        change = np.abs(
+            np.asarray(measured_state, dtype=float).reshape(-1)[_NEIGHBOURHOOD_COMPONENTS]
+            - self._warm_state[_NEIGHBOURHOOD_COMPONENTS]
+        )
         return bool(np.all(change <= WARM_START_NEIGHBOURHOOD))
 
     def due(self, now_ns: int) -> bool:

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from helireach_ros.core.aircraft.model import clip_rotor_speed_noise, state_from_sensors
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker, predict_state
 from helireach_ros.core.estimation.gross_weight import estimate_gross_weight
 from helireach_ros.core.flight.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
@@ -171,7 +172,7 @@ def fly_closed_loop(
             if current is not None and starts > now:
                 state = _flown_ahead(planner, state, current, now, starts - now, disturbance)
             remaining = plan_time_remaining(current[1].time_to_land, starts - current[0]) if current else math.inf
-            if replanning_ends(state[3], remaining, settings.min_height, settings.min_remaining):
+            if replanning_ends(state[StateIndex.HEIGHT], remaining, settings.min_height, settings.min_remaining):
                 replanning = False
             else:
                 if current is None:  # the failure plan: from the trim flown before, after the reaction delay

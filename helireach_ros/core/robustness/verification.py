@@ -40,6 +40,7 @@ import numpy as np
 
 from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.flight.simulation import (
     ControlSchedule,
     Scenario,
@@ -216,7 +217,7 @@ def own_landing(
 
 def scenario_at(plan: LandingPlan, noise: SensorNoise | None = None, seed: int = 0) -> Scenario:
     """A scenario that starts at the failure in ``plan``'s initial state (for :func:`verify_plan_robust`)."""
-    height, speed = float(plan.initial_state[3]), float(plan.initial_state[1])
+    height, speed = float(plan.initial_state[StateIndex.HEIGHT]), float(plan.initial_state[StateIndex.FORWARD_SPEED])
     return Scenario(
         name="from_plan_state", height=min(max(height, 0.0), 5000.0), forward_speed=min(max(speed, 0.0), 120.0),
         failure_time=0.0, noise=noise or SensorNoise(), seed=seed,

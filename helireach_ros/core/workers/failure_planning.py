@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from helireach_ros.core.aircraft.model import StateIndex
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.estimation.weight_tracking import WeightChoice, ready_choice
 from helireach_ros.core.policies.failure_episode import FailureEpisode
@@ -166,13 +166,7 @@ class FailurePlanner:
             return
         state, stamp_ns = current.state, current.stamp_ns
         envelope = self.backend.envelope if self.backend is not None else None
-        stored = (
-            envelope.nearest_plan(
-                state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED], -state[StateIndex.DESCENT_RATE]
-            )
-            if envelope is not None
-            else None
-        )
+        stored = envelope.nearest_plan_to(state) if envelope is not None else None
         warm_start, source = (stored.warm_start, "envelope") if stored is not None else (None, "none")
         plan, error = self.solve(state, warm_start)
         if plan is None or not plan.solver.success:

@@ -28,7 +28,6 @@ from typing import Any
 
 import numpy as np
 
-from helireach_ros.core.aircraft.model import StateIndex
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
 from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
 from helireach_ros.core.policies.plan_status import StatusReport, live_report
@@ -120,9 +119,7 @@ class LiveScheduler:
             envelope = self._backend.envelope
             stored = None
             if envelope is not None and not self.evaluator.warm_start_applies(state):
-                stored = envelope.nearest_plan(
-                    state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED], -state[StateIndex.DESCENT_RATE]
-                )
+                stored = envelope.nearest_plan_to(state)
             prepared = self.evaluator.prepare(
                 state, current.stamp_ns, now_ns, stored.warm_start if stored is not None else None
             )

@@ -27,6 +27,7 @@ import numpy as np
 
 from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.aircraft.model import disturbed_dynamics_function, trim_level_flight
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.ocp.block_ldl import linear_solver_options
 from helireach_ros.core.ocp.compiled_nlp import CodegenSettings, ipopt_solvers
 from helireach_ros.core.ocp.settings import PlannerSettings
@@ -45,9 +46,9 @@ def terminal_cost(airframe: Airframe, state) -> np.ndarray:
     return np.asarray(
         np.maximum.reduce(
             [
-                np.abs(state[0]) / limits.max_descent_rate,
-                np.abs(state[1]) / limits.max_forward_speed,
-                np.abs(state[3]) / limits.height_tolerance,
+                np.abs(state[StateIndex.DESCENT_RATE]) / limits.max_descent_rate,
+                np.abs(state[StateIndex.FORWARD_SPEED]) / limits.max_forward_speed,
+                np.abs(state[StateIndex.HEIGHT]) / limits.height_tolerance,
             ]
         )
         - 1.0
@@ -217,20 +218,27 @@ class Transcription(ABC):
 
     def guess_landing_time(self, initial_state: np.ndarray) -> float:
         """A rough landing time for cold starts: a steep autorotation descent plus a flare."""
-        height = max(float(initial_state[3]), 0.0)
+        height = max(float(initial_state[StateIndex.HEIGHT]), 0.0)
         return float(np.clip(3.0 + height / 15.0, 1.0, 0.8 * self.settings.max_time_to_land))
 
     def guess_states(self, initial_state: np.ndarray, times: np.ndarray, landing_time: float) -> np.ndarray:
         """A straight-line guess from the initial state to a gentle touchdown (6 × len(times))."""
         fraction = np.clip(times / landing_time, 0.0, 1.0)
-        height = max(float(initial_state[3]), 0.0)
-        speed = float(initial_state[1])
+        height = max(float(initial_state[StateIndex.HEIGHT]), 0.0)
+        speed = float(initial_state[StateIndex.FORWARD_SPEED])
         omega0 = self.airframe.nominal_rotor_speed
         states = np.empty((6, len(times)))
-        states[0] = height / landing_time * np.sin(math.pi * fraction) * 1.5
-        states[1] = speed * (1.0 - fraction)
-        states[2] = float(initial_state[2]) + (omega0 - float(initial_state[2])) * fraction
-        states[3] = height * (1.0 - fraction)
-        states[4] = float(initial_state[4]) + speed * landing_time * (fraction - fraction**2 / 2.0)
-        states[5] = float(initial_state[5]) * np.exp(-times / self.airframe.engine_time_constant)
+        states[StateIndex.DESCENT_RATE] = height / landing_time * np.sin(math.pi * fraction) * 1.5
+        states[StateIndex.FORWARD_SPEED] = speed * (1.0 - fraction)
+        states[StateIndex.ROTOR_SPEED] = (
+            float(initial_state[StateIndex.ROTOR_SPEED])
+            + (omega0 - float(initial_state[StateIndex.ROTOR_SPEED])) * fraction
+        )
+        states[StateIndex.HEIGHT] = height * (1.0 - fraction)
+        states[StateIndex.DISTANCE] = float(initial_state[StateIndex.DISTANCE]) + speed * landing_time * (
+            fraction - fraction**2 / 2.0
+        )
+        states[StateIndex.ENGINE_POWER] = float(initial_state[StateIndex.ENGINE_POWER]) * np.exp(
+            -times / self.airframe.engine_time_constant
+        )
         return np.clip(states, self.state_lower[:, None], self.state_upper[:, None])

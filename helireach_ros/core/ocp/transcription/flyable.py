@@ -45,6 +45,7 @@ import casadi as ca
 import numpy as np
 
 from helireach_ros.core.aircraft.smooth import smooth_positive
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.ocp.transcription.base import DecodedPlan
 from helireach_ros.core.ocp.transcription.verified import _TIME_SCALE, VerifiedTranscription
 
@@ -94,7 +95,7 @@ class FlyableTranscription(VerifiedTranscription):
             change = (breakpoints[:, k + 1] - breakpoints[:, k]) / control_scale
             allowed = rates * landing_time * float(self.fractions[k]) / control_scale
             rate_rows += [change - allowed, -change - allowed]
-        heights, descent_rates = physical_states[3, :], physical_states[0, :]
+        heights, descent_rates = physical_states[StateIndex.HEIGHT, :], physical_states[StateIndex.DESCENT_RATE, :]
         commit = (
             descent_rates + COMMIT_GAIN * smooth_positive(heights - flyability.commit_height, COMMIT_SMOOTHING)
         ) / self.state_scale[0]
@@ -110,7 +111,10 @@ class FlyableTranscription(VerifiedTranscription):
         point_times = landing_time * ca.DM(self._point_fractions()).T
         backoff_now = settings.rotor_speed_backoff * ca.fmin(point_times / _BACKOFF_RAMP_S, 1.0)
         rotor_margin = (
-            physical_states[2, :] / omega0 - touchdown_low - backoff_now - (flight_low - touchdown_low) * step
+            physical_states[StateIndex.ROTOR_SPEED, :] / omega0
+            - touchdown_low
+            - backoff_now
+            - (flight_low - touchdown_low) * step
         )
         terminal_scaled = states[:, -1]
         margins = []
@@ -119,7 +123,7 @@ class FlyableTranscription(VerifiedTranscription):
             ceiling_backoff = np.full(self.n_states, settings.rotor_speed_backoff)
             ceiling_backoff[: settings.degree] = 0.0
             margins = self._path_margins(
-                rotor_ratio=physical_states[2, :] / omega0,
+                rotor_ratio=physical_states[StateIndex.ROTOR_SPEED, :] / omega0,
                 floor=rotor_margin,
                 ceiling_backoff=ca.DM(ceiling_backoff).T,
                 touchdown_pitch=breakpoints[1, -1],
