@@ -4,7 +4,8 @@ Every value of a status topic (``msg_docs/``) is a string. Producers write with 
 ``true``/``false``, floats with round-trip precision (``repr``), everything else with ``str``. Consumers read flags with
 :func:`parse_bool`, which accepts exactly what :func:`format_value` writes: a flag that is not ``true`` or ``false`` is
 unknown (None), never guessed, so a flag cannot be written one way and read another.
-ROS-free: the nodes, the display and the tests use the same functions.
+ROS-free: the nodes, the display and the tests use the same functions, mostly through the typed contract of each
+topic (:mod:`helireach_ros.core.status_contracts`).
 """
 
 from __future__ import annotations

@@ -18,7 +18,13 @@ from nav_msgs.msg import Path as PathMsg
 from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.policies.failure_episode import EpisodeState
-from helireach_ros.core.status_values import parse_bool
+from helireach_ros.core.status_contracts import (
+    PlanStatusValues,
+    RobustVerdictValues,
+    SafetyStatusValues,
+    TouchdownValues,
+)
+from helireach_ros.core.status_values import format_value
 from helireach_ros.ros import messages as rm
 
 __all__ = [
@@ -261,31 +267,30 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
     The keys are the planner node's (``helireach_ros.ros.nodes.planner_node``, ``msg_docs/``); a missing key is None.
     """
     values = rm.status_values(message)
+    plan = PlanStatusValues.from_values(values)
     return {
         "level": banner_level(message.level),
         "message": str(message.message),
-        "safe": parse_bool(values.get("safe")),
-        "verified": parse_bool(values.get("verified")),
-        "fallback": parse_bool(values.get("fallback")),
-        "value": finite(values.get("value")),
-        "time_to_land_s": finite(values.get("time_to_land_s")),
-        "solve_time_ms": finite(values.get("solve_time_ms")),
-        "replan_index": finite(values.get("replan_index")),
-        "status": values.get("status"),
-        "late": parse_bool(values.get("late")),
-        "late_by_s": finite(values.get("late_by_s")),
-        "state_delay_s": finite(values.get("state_delay_s")),
-        "touchdown_descent_rate_ms": finite(values.get("predicted_touchdown_descent_rate_m_s")),
-        "touchdown_forward_speed_ms": finite(values.get("predicted_touchdown_forward_speed_m_s")),
-        "standby": parse_bool(values.get("standby")),
-        "robust": parse_bool(values.get("robust")),  # a later plan kind: read if sent, never inferred
-        "gross_weight_n": finite(values.get("gross_weight_n")),
-        "density_altitude_m": finite(values.get("density_altitude_m")),
+        "safe": plan.safe,
+        "verified": plan.verified,
+        "fallback": plan.fallback,
+        "value": finite(plan.value),
+        "time_to_land_s": finite(plan.time_to_land_s),
+        "solve_time_ms": finite(plan.solve_time_ms),
+        "replan_index": finite(plan.replan_index),
+        "status": plan.status,
+        "late": plan.late,
+        "late_by_s": finite(plan.late_by_s),
+        "state_delay_s": finite(plan.state_delay_s),
+        "touchdown_descent_rate_ms": finite(plan.touchdown_descent_rate),
+        "touchdown_forward_speed_ms": finite(plan.touchdown_forward_speed),
+        "standby": plan.standby,
+        # robust only once verified robustly (pending: the verdict follows on /helireach/robust_verdict)
+        "robust": plan.robust if isinstance(plan.robust, bool) else None,
+        "gross_weight_n": finite(plan.gross_weight),
+        "density_altitude_m": finite(plan.density_altitude),
         "values": values,
     }
-
-
-_ROBUST_VALUES = ("pending", "true", "false")
 
 
 def robust_verdict_section(message: DiagnosticStatus) -> dict[str, Any]:
@@ -295,15 +300,14 @@ def robust_verdict_section(message: DiagnosticStatus) -> dict[str, Any]:
     verdict); ``failure_id`` and ``failure_stamp_ns`` name the failure it belongs to (the page shows it only beside
     that failure's plan).
     """
-    values = rm.status_values(message)
-    robust = str(values.get("robust", "")).strip().lower()
+    verdict = RobustVerdictValues.from_values(rm.status_values(message))
     return {
-        "robust": robust if robust in _ROBUST_VALUES else None,
-        "error": parse_bool(values.get("robust_error")) is True,
-        "failure_id": values.get("failure_id"),
-        "failure_stamp_ns": values.get("failure_stamp_ns"),
-        "models_flown": finite(values.get("robust_models_flown")),
-        "design_size": finite(values.get("robust_design_size")),
+        "robust": None if verdict.robust is None else format_value(verdict.robust),
+        "error": verdict.error is True,
+        "failure_id": None if verdict.failure_id is None else str(verdict.failure_id),
+        "failure_stamp_ns": None if verdict.failure_stamp_ns is None else str(verdict.failure_stamp_ns),
+        "models_flown": finite(verdict.models_flown),
+        "design_size": finite(verdict.design_size),
         "level": banner_level(message.level),
         "message": str(message.message),
     }
@@ -336,16 +340,16 @@ def touchdown_section(message: DiagnosticStatus) -> dict[str, Any]:
 
     ``within_limits`` is None when the report does not say (the page then says the result is unknown).
     """
-    values = rm.status_values(message)
+    touchdown = TouchdownValues.from_values(rm.status_values(message))
     return {
-        "within_limits": parse_bool(values.get("within_limits")),
-        "descent_rate_ms": finite(values.get("descent_rate_m_s")),
-        "forward_speed_ms": finite(values.get("forward_speed_m_s")),
-        "max_descent_rate_ms": finite(values.get("max_descent_rate_m_s")),
-        "max_forward_speed_ms": finite(values.get("max_forward_speed_m_s")),
-        "rotor_speed_pct": finite(values.get("rotor_speed_pct")),
-        "time_after_failure_s": finite(values.get("time_after_failure_s")),
-        "reason": values.get("reason", ""),
+        "within_limits": touchdown.within_limits,
+        "descent_rate_ms": finite(touchdown.descent_rate),
+        "forward_speed_ms": finite(touchdown.forward_speed),
+        "max_descent_rate_ms": finite(touchdown.max_descent_rate),
+        "max_forward_speed_ms": finite(touchdown.max_forward_speed),
+        "rotor_speed_pct": finite(touchdown.rotor_speed_pct),
+        "time_after_failure_s": finite(touchdown.time_after_failure_s),
+        "reason": touchdown.reason or "",
         "level": banner_level(message.level),
         "message": str(message.message),
     }
@@ -358,10 +362,10 @@ def to_json(value: Any) -> str:
 
 def safety_status_section(message: DiagnosticStatus) -> dict[str, Any]:
     """The banner's content from a ``/helireach/safety_status`` message (level, text, margin, envelope id)."""
-    values = rm.status_values(message)
+    status = SafetyStatusValues.from_values(rm.status_values(message))
     return {
         "level": banner_level(message.level),
         "message": str(message.message),
-        "margin": finite(values.get("margin_ft_kt")),
-        "envelope_id": values.get("envelope_id"),
+        "margin": finite(status.margin),
+        "envelope_id": status.envelope_id,
     }

@@ -14,21 +14,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["PlanComparison", "compare_logged_plans", "logged_plan_counts", "plan_kind"]
+from helireach_ros.core.status_contracts import PlanStatusValues
 
-_STATE_KEYS = (
-    "initial_descent_rate_m_s",
-    "initial_forward_speed_m_s",
-    "initial_rotor_speed_rad_s",
-    "initial_height_m",
-    "initial_distance_m",
-    "initial_engine_power_w",
-)
-_DISTURBANCE_KEYS = (
-    "disturbance_descent_acceleration_m_s2",
-    "disturbance_forward_acceleration_m_s2",
-    "disturbance_rotor_acceleration_rad_s2",
-)
+__all__ = ["PlanComparison", "compare_logged_plans", "logged_plan_counts", "plan_kind"]
 
 
 @dataclass(frozen=True)
@@ -57,7 +45,7 @@ class PlanComparison:
     reproduced: bool
 
 
-def _logged_plans(path: Path) -> tuple[list[tuple[dict[str, str], Any]], dict[str, Any]]:
+def _logged_plans(path: Path) -> tuple[list[tuple[PlanStatusValues, Any]], dict[str, Any]]:
     """(status values, trajectory message) of each failure's first converged plan in a log, and its metadata."""
     from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.serialization import deserialize_message
@@ -69,28 +57,28 @@ def _logged_plans(path: Path) -> tuple[list[tuple[dict[str, str], Any]], dict[st
     statuses, trajectories = [], {}
     for message in read_log(path):
         if message.topic == rm.TOPIC_PLAN_STATUS:
-            values = rm.status_values(deserialize_message(message.cdr, DiagnosticStatus))
-            if plan_kind(values) == "first":
-                statuses.append(values)
+            logged = PlanStatusValues.from_values(rm.status_values(deserialize_message(message.cdr, DiagnosticStatus)))
+            if plan_kind(logged) == "first":
+                statuses.append(logged)
         elif message.topic == rm.TOPIC_LANDING_TRAJECTORY:
             trajectory = deserialize_message(message.cdr, JointTrajectory)
             trajectories[rm.stamp_nanoseconds(trajectory.header.stamp)] = trajectory
-    pairs = [(values, trajectories.get(int(values["state_stamp_ns"]))) for values in statuses]
+    pairs = [(logged, trajectories.get(logged.state_stamp_ns or -1)) for logged in statuses]
     return pairs, read_log_metadata(path)
 
 
-def plan_kind(values: dict[str, str]) -> str:
+def plan_kind(plan: PlanStatusValues) -> str:
     """What a logged plan status is: ``first`` (a failure's first converged plan: what ``--compare`` re-runs),
     ``standby``, ``replan``, ``fallback``, or ``other`` (no plan yet, ended, landed)."""
-    if values.get("fallback") == "true":
+    if plan.fallback is True:
         return "fallback"
-    if values.get("fallback") != "false" or values.get("status") not in ("safe", "unsafe", "unverified"):
+    if plan.fallback is not False or plan.status not in ("safe", "unsafe", "unverified"):
         return "other"
     # A standby plan was made before the failure from a live state, warm-started along the live chain (not in the
     # log): the first plan *of the failure* is the refined one that follows it.
-    if values.get("standby") == "true":
+    if plan.standby is True:
         return "standby"
-    return "first" if values.get("replan_index") == "0" else "replan"
+    return "first" if plan.replan_index == 0 else "replan"
 
 
 def logged_plan_counts(path: str | Path) -> dict[str, int]:
@@ -104,7 +92,8 @@ def logged_plan_counts(path: str | Path) -> dict[str, int]:
     counts: dict[str, int] = {}
     for message in read_log(path):
         if message.topic == rm.TOPIC_PLAN_STATUS:
-            kind = plan_kind(rm.status_values(deserialize_message(message.cdr, DiagnosticStatus)))
+            values = rm.status_values(deserialize_message(message.cdr, DiagnosticStatus))
+            kind = plan_kind(PlanStatusValues.from_values(values))
             counts[kind] = counts.get(kind, 0) + 1
     return counts
 
@@ -163,19 +152,20 @@ def compare_logged_plans(
     except Exception:
         envelope = None
     comparisons = []
-    for values, trajectory in pairs:
-        state = np.array([float(values[key]) for key in _STATE_KEYS])
+    for logged, trajectory in pairs:
+        if logged.initial_state is None:
+            raise ValueError(f"{path}: a plan status of failure {logged.failure_id} has no readable initial state")
+        state = np.array(logged.initial_state)
         stored = envelope.nearest_plan_to(state) if envelope is not None else None
         # the control flown at the plan's start and its reaction delay, as logged (older logs: the defaults)
-        thrust, pitch = values.get("initial_thrust_coefficient"), values.get("initial_pitch_rad")
-        control = None if thrust is None or pitch is None else np.array([float(thrust), float(pitch)])
-        delay = float(values["reaction_delay_s"]) if "reaction_delay_s" in values else None
+        control = None if logged.initial_control is None else np.array(logged.initial_control)
         # the weight the plan was made for (the planner node's estimate; older logs: the airframe's)
-        weight = float(values.get("planned_gross_weight_n", airframe.gross_weight))
+        weight = logged.planned_gross_weight if logged.planned_gross_weight is not None else airframe.gross_weight
         solver = planner if weight == airframe.gross_weight else get_planner(airframe.with_conditions(weight), settings)
         # the model error the plan was made for (re-plans with estimate_disturbance; older logs: none)
-        disturbance = np.array([float(values.get(key, 0.0)) for key in _DISTURBANCE_KEYS])
-        plan = solver.plan(state, stored.warm_start if stored is not None else None, control, delay, disturbance)
+        disturbance = np.zeros(3) if logged.disturbance is None else np.array(logged.disturbance)
+        warm_start = stored.warm_start if stored is not None else None
+        plan = solver.plan(state, warm_start, control, logged.reaction_delay_s, disturbance)
         rerun_times, rerun_values = piecewise_linear_controls(
             plan.control_times, plan.control_values, plan.control_interpolation
         )
@@ -188,21 +178,21 @@ def compare_logged_plans(
             ).max(axis=1)
         else:
             difference = np.array([math.inf, math.inf])
-        logged_time = float(values["time_to_land_s"])
+        logged_time = math.nan if logged.time_to_land_s is None else logged.time_to_land_s
         reproduced = bool(
-            values["status"] == plan.status
+            logged.status == plan.status
             and difference[0] <= thrust_tolerance
             and difference[1] <= pitch_tolerance
             and abs(logged_time - plan.time_to_land) <= time_tolerance
         )
         comparisons.append(
             PlanComparison(
-                failure_id=int(values["failure_id"]),
-                logged_status=values["status"],
+                failure_id=-1 if logged.failure_id is None else logged.failure_id,
+                logged_status=logged.status or "",
                 rerun_status=plan.status,
                 logged_time_to_land=logged_time,
                 rerun_time_to_land=plan.time_to_land,
-                logged_value=float(values["value"]),
+                logged_value=math.nan if logged.value is None else logged.value,
                 rerun_value=plan.value,
                 max_thrust_difference=float(difference[0]),
                 max_pitch_difference=float(difference[1]),

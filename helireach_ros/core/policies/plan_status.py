@@ -20,9 +20,16 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
 from helireach_ros.core.evidence.plan_verdict import plan_verdict
 from helireach_ros.core.policies.failure_episode import EpisodePhase, PlanLateness, late_verdict
+from helireach_ros.core.status_contracts import (
+    ROBUST_PENDING,
+    LiveVerdictValues,
+    PlanStatusValues,
+    RobustVerdictValues,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -94,26 +101,26 @@ def plan_values(plan: Any) -> dict[str, Any]:
     """The values that describe a converged plan itself (a :class:`~helireach_ros.core.planning.planner.LandingPlan`);
     the node's bookkeeping (warm start, re-plan index, latency, failure and state) is added by the reports below."""
     touchdown = plan.replay.touchdown_state
+    verdict = PlanStatusValues(
+        status=plan.status,
+        safe=plan.safe,
+        verified=plan.verified,
+        fallback=False,
+        value=plan.value,
+        time_to_land_s=plan.time_to_land,
+        solve_time_ms=plan.solver.solve_time_ms,
+        touchdown_descent_rate=float(touchdown[StateIndex.DESCENT_RATE]),
+        touchdown_forward_speed=float(touchdown[StateIndex.FORWARD_SPEED]),
+        touchdown_rotor_speed=float(touchdown[StateIndex.ROTOR_SPEED]),
+        reaction_delay_s=plan.reaction_delay_s,
+        initial_control=tuple(plan.initial_control),
+        disturbance=tuple(plan.disturbance),
+    )
     return {
-        "status": plan.status,
-        "safe": plan.safe,
-        "verified": plan.verified,
-        "fallback": False,
-        "value": plan.value,
-        "time_to_land_s": plan.time_to_land,
-        "solve_time_ms": plan.solver.solve_time_ms,
+        **verdict.to_values(),
         "iterations": plan.solver.iterations,
         "solver_status": plan.solver.status,
-        "predicted_touchdown_descent_rate_m_s": touchdown[0],
-        "predicted_touchdown_forward_speed_m_s": touchdown[1],
-        "predicted_touchdown_rotor_speed_rad_s": touchdown[2],
         "method": plan.method,
-        "reaction_delay_s": plan.reaction_delay_s,
-        "initial_thrust_coefficient": float(plan.initial_control[0]),
-        "initial_pitch_rad": float(plan.initial_control[1]),
-        "disturbance_descent_acceleration_m_s2": float(plan.disturbance[0]),
-        "disturbance_forward_acceleration_m_s2": float(plan.disturbance[1]),
-        "disturbance_rotor_acceleration_rad_s2": float(plan.disturbance[2]),
         **flyability_values(plan.replay.flyability),
     }
 
@@ -121,30 +128,20 @@ def plan_values(plan: Any) -> dict[str, Any]:
 def lateness_values(lateness: PlanLateness | None) -> dict[str, Any]:
     """``late``, ``late_by_s``, ``state_delay_s``, ``after_fallback`` (None, as for re-plans: not late, no delay)."""
     if lateness is None:
-        return {"late": False, "late_by_s": 0.0, "after_fallback": False}
-    return {
-        "late": lateness.late,
-        "late_by_s": lateness.late_by_s,
-        "state_delay_s": lateness.state_delay_s,
-        "after_fallback": lateness.after_fallback,
-    }
+        return {**PlanStatusValues(late=False, late_by_s=0.0).to_values(), "after_fallback": False}
+    late = PlanStatusValues(late=lateness.late, late_by_s=lateness.late_by_s, state_delay_s=lateness.state_delay_s)
+    return {**late.to_values(), "after_fallback": lateness.after_fallback}
 
 
 def weight_values(configured_weight: float, weight: WeightChoice) -> dict[str, Any]:
     """The weight a plan was made for; ``gross_weight_n`` stays the configured aircraft's."""
     return {
-        "gross_weight_n": configured_weight,
-        "planned_gross_weight_n": weight.gross_weight,
+        **PlanStatusValues(gross_weight=configured_weight, planned_gross_weight=weight.gross_weight).to_values(),
         "gross_weight_source": weight.source,
         "gross_weight_change": weight.relative_change,
         "gross_weight_estimate_change": weight.estimated_change,
         "gross_weight_reason": weight.reason,
     }
-
-
-def _state_values(prefix: str, state: Sequence[float] | np.ndarray) -> dict[str, float]:
-    names = ("descent_rate_m_s", "forward_speed_m_s", "rotor_speed_rad_s", "height_m", "distance_m", "engine_power_w")
-    return {f"{prefix}{name}": float(value) for name, value in zip(names, state, strict=True)}
 
 
 def _episode_values(
@@ -155,14 +152,17 @@ def _episode_values(
     weight: WeightChoice,
 ) -> dict[str, Any]:
     """Keys of every plan and fallback status: the failure, the state planned from, the aircraft."""
+    episode = PlanStatusValues(
+        failure_id=failure.failure_id,
+        failure_stamp_ns=failure.event_stamp_ns,
+        state_stamp_ns=stamp_ns,
+        density_altitude=identity.density_altitude,
+        initial_state=tuple(state),
+    )
     return {
-        "failure_id": failure.failure_id,
-        "failure_stamp_ns": failure.event_stamp_ns,
-        "state_stamp_ns": stamp_ns,
-        **_state_values("initial_", state),
+        **episode.to_values(),
         "airframe": identity.airframe,
         **weight_values(identity.gross_weight, weight),
-        "density_altitude_m": identity.density_altitude,
         "envelope_id": identity.envelope_id,
     }
 
@@ -188,16 +188,15 @@ def converged_plan_report(
     """
     values = {
         **plan_values(plan),
-        "standby": standby,
+        **PlanStatusValues(standby=standby, replan_index=replan_index).to_values(),
         "warm_start": warm_source,
-        "replan_index": replan_index,
         **lateness_values(lateness),
         "latency_ms": latency_ms,
         "rotor_speed_source": rotor_source,
         **_episode_values(identity, failure, plan.initial_state, stamp_ns, weight),
     }
     if robust_design is not None:
-        values.update(robust="pending", robust_design=robust_design)
+        values.update(PlanStatusValues(robust=ROBUST_PENDING).to_values(), robust_design=robust_design)
     level, text = plan_verdict(plan, rotor_source)
     if standby:
         state_age_s = (failure.event_stamp_ns - stamp_ns) * 1e-9
@@ -220,16 +219,14 @@ def fallback_report(
 ) -> StatusReport:
     """The status of a fallback: WARN, never safe; the file's model (no weight estimate behind it)."""
     weight = WeightChoice(identity.gross_weight, "file", 0.0, "fallback controls from the file's model")
+    verdict = PlanStatusValues(
+        status="fallback", safe=False, verified=False, fallback=True, standby=False, reason=reason,
+        time_to_land_s=fallback.time_to_land,
+    )  # fmt: skip
     values = {
-        "status": "fallback",
-        "safe": False,
-        "verified": False,
-        "fallback": True,
-        "standby": False,
+        **verdict.to_values(),
         "fallback_kind": fallback.kind,
         "fallback_source_status": fallback.source_status,
-        "reason": reason,
-        "time_to_land_s": fallback.time_to_land,
         "latency_ms": latency_ms,
         **lateness_values(lateness),
         **_episode_values(identity, failure, state, stamp_ns, weight),
@@ -242,9 +239,10 @@ def fallback_report(
 
 def no_plan_report(failure: FailureEpisode, text: str) -> StatusReport:
     """ERROR: no plan for the failure (no valid state, no planner), and why."""
-    values = {"status": "none", "safe": False, "verified": False, "fallback": False, "reason": text,
-              "failure_id": failure.failure_id}  # fmt: skip
-    return StatusReport("ERROR", f"NO PLAN: {text}", values)
+    verdict = PlanStatusValues(
+        status="none", safe=False, verified=False, fallback=False, reason=text, failure_id=failure.failure_id
+    )
+    return StatusReport("ERROR", f"NO PLAN: {text}", verdict.to_values())
 
 
 _EPISODE_END = {
@@ -267,14 +265,12 @@ def episode_end_report(
     """WARN: the episode is over (``ended`` or ``landed``): a late joiner's latched status is not the last plan of an
     episode that is over."""
     status, reason, text = _EPISODE_END[outcome]
+    verdict = PlanStatusValues(
+        status=status, safe=False, verified=False, fallback=False, reason=reason, failure_id=failure.failure_id,
+        failure_stamp_ns=failure.event_stamp_ns,
+    )  # fmt: skip
     values = {
-        "status": status,
-        "safe": False,
-        "verified": False,
-        "fallback": False,
-        "reason": reason,
-        "failure_id": failure.failure_id,
-        "failure_stamp_ns": failure.event_stamp_ns,
+        **verdict.to_values(),
         "ended_stamp_ns": episode.ended_ns if episode.ended_ns is not None else now_ns,
         "episode_id": episode.episode_id,
         "plans_published": len(failure.history),
@@ -295,19 +291,23 @@ def live_report(
     """A live verdict ("if the engine failed now"): OK only for a replay-verified safe plan; no plan or a solver
     that did not converge is ERROR (unknown, never unsafe by default)."""
     plan = verdict.plan
+    verified = plan is not None and plan.verified
+    live = LiveVerdictValues(
+        status=verdict.status,
+        value=verdict.value,
+        safe=verdict.safe,
+        verified=verified,
+        state_stamp_ns=verdict.state_stamp_ns,
+        solve_time_ms=verdict.solve_time_ms,
+        state_age_s=verdict.state_age_s(now_ns),
+        time_to_land_s=plan.time_to_land if plan is not None else math.nan,
+        power_fraction=power_fraction,
+        reason=verdict.reason,
+        standby=standby,
+        state=tuple(verdict.state),
+    )
     values = {
-        "status": verdict.status,
-        "value": verdict.value,
-        "safe": verdict.safe,
-        "verified": plan is not None and plan.verified,
-        "state_stamp_ns": verdict.state_stamp_ns,
-        "solve_time_ms": verdict.solve_time_ms,
-        "state_age_s": verdict.state_age_s(now_ns),
-        "time_to_land_s": plan.time_to_land if plan is not None else math.nan,
-        "power_fraction": power_fraction,
-        "reason": verdict.reason,
-        "standby": standby,
-        **_state_values("", verdict.state),
+        **live.to_values(),
         **weight_values(configured_weight, weight),
     }
     if plan is None:
@@ -315,7 +315,7 @@ def live_report(
     if not plan.solver.success:  # plan_verdict would call it unsafe: it is unknown
         return StatusReport("ERROR", f"if the engine failed now: UNKNOWN (solver {plan.solver.status})", values)
     _, text = plan_verdict(plan, "measured")
-    level = "OK" if verdict.safe and values["verified"] else "ERROR"
+    level = "OK" if verdict.safe and verified else "ERROR"
     return StatusReport(level, f"if the engine failed now: {text}", values)
 
 
@@ -323,11 +323,10 @@ def robust_report(key: tuple[int, int, int], summary: Any | None, design: str) -
     """A failure plan's robust verdict (a :class:`~helireach_ros.core.robustness.verification.RobustSummary`), keyed by
     (failure id, failure stamp, state stamp); None: pending (STALE)."""
     failure_id, failure_stamp_ns, stamp_ns = key
-    values: dict[str, Any] = {
-        "failure_id": failure_id, "failure_stamp_ns": failure_stamp_ns, "state_stamp_ns": stamp_ns,
-    }  # fmt: skip
+    belongs_to = RobustVerdictValues(failure_id=failure_id, failure_stamp_ns=failure_stamp_ns, state_stamp_ns=stamp_ns)
+    values: dict[str, Any] = belongs_to.to_values()
     if summary is None:
-        values.update(robust="pending", robust_design=design)
+        values.update(RobustVerdictValues(robust=ROBUST_PENDING, design=design).to_values())
         return StatusReport("STALE", f"PENDING: robust verification running ({design})", values)
     values.update(summary.values())
     if summary.robust:

@@ -50,13 +50,13 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from helireach_ros.core.envelope.domain import DomainCheck, ValidityDomain
 from helireach_ros.core.policies.vehicle_readings import OdometryReading, StateLimits, state_problems
-from helireach_ros.core.status_values import parse_bool
+from helireach_ros.core.status_contracts import LiveVerdictValues, PlanStatusValues, SafetyStatusValues
 from helireach_ros.core.units import FT, KT
 
 __all__ = [
@@ -283,9 +283,9 @@ def _before_failure(
     if live is not None:
         values.update(live_status=live.status, live_value=live.value, live_state_age_s=live.state_age_s)
     if envelope is not None:
+        values.update(SafetyStatusValues(margin=envelope.margin).to_values())
         values.update(
             envelope_status=envelope.status,
-            margin_ft_kt=envelope.margin,
             in_domain=envelope.domain.inside,
             domain=" ; ".join(envelope.domain.reasons),
             envelope_verdict=envelope.verdict,
@@ -363,7 +363,7 @@ def assess_safety(
         envelope_verdict: ``robust`` (the envelope's robust verdict where it has one) or ``nominal``.
     """
     values: dict[str, Any] = {
-        "envelope_id": envelope.envelope_id if envelope is not None else "",
+        **SafetyStatusValues(envelope_id=envelope.envelope_id if envelope is not None else "").to_values(),
         "warn_margin_ft_kt": warn_margin,
     }
     state_problem = ""
@@ -416,34 +416,36 @@ def assess_safety(
     return dataclasses.replace(decision, values={**values, **decision.values})
 
 
-def live_evidence(values: dict[str, str], now_ns: int, max_age_s: float) -> LiveEvidence | None:
-    """A ``/helireach/live_reachability`` message as evidence (its age counted on this node's clock)."""
-    try:
-        state_age_s = (now_ns - int(values["state_stamp_ns"])) * 1e-9
-        return LiveEvidence(
-            status=values["status"],
-            value=float(values.get("value", "nan")),
-            verified=parse_bool(values.get("verified")) is True,
-            state_age_s=state_age_s,
-            current=0.0 <= state_age_s <= max_age_s,
-            reason=values.get("reason", ""),
-        )
-    except (KeyError, ValueError):
-        return None  # unreadable: no evidence, never a SAFE
-
-
-def plan_evidence(values: dict[str, str], episode_started_ns: int | None) -> PlanEvidence | None:
-    """The plan status as evidence, if it belongs to the current episode (same failure stamp)."""
-    try:
-        if episode_started_ns is None or int(values.get("failure_stamp_ns", "-1")) != episode_started_ns:
-            return None
-        status = "fallback" if parse_bool(values.get("fallback")) is True else values.get("status", "none")
-        return PlanEvidence(
-            status=status,
-            verified=parse_bool(values.get("safe")) is True and parse_bool(values.get("verified")) is True,
-            standby=parse_bool(values.get("standby")) is True,
-            time_to_land_s=float(values.get("time_to_land_s", "nan")),
-            late=float(values.get("late_by_s", "0")) > 0.0,  # a late *state* (not only after a fallback)
-        )
-    except ValueError:
+def live_evidence(values: Mapping[str, str], now_ns: int, max_age_s: float) -> LiveEvidence | None:
+    """A ``/helireach/live_reachability`` message as evidence (its age counted on this node's clock); None when its
+    status or state stamp is missing or unreadable (no evidence, never a SAFE)."""
+    live = LiveVerdictValues.from_values(values)
+    if live.status is None or live.state_stamp_ns is None or ("value" in values and live.value is None):
         return None
+    state_age_s = (now_ns - live.state_stamp_ns) * 1e-9
+    return LiveEvidence(
+        status=live.status,
+        value=math.nan if live.value is None else live.value,
+        verified=live.verified is True,
+        state_age_s=state_age_s,
+        current=0.0 <= state_age_s <= max_age_s,
+        reason=live.reason or "",
+    )
+
+
+def plan_evidence(values: Mapping[str, str], episode_started_ns: int | None) -> PlanEvidence | None:
+    """The plan status as evidence, if it belongs to the current episode (same failure stamp); None when a number it
+    carries does not parse (no evidence, never a SAFE)."""
+    plan = PlanStatusValues.from_values(values)
+    if episode_started_ns is None or plan.failure_stamp_ns != episode_started_ns:
+        return None
+    numbers = {"time_to_land_s": plan.time_to_land_s, "late_by_s": plan.late_by_s}
+    if any(name in values and number is None for name, number in numbers.items()):
+        return None
+    return PlanEvidence(
+        status="fallback" if plan.is_fallback else plan.status or "none",
+        verified=plan.replay_verified_safe,
+        standby=plan.standby is True,
+        time_to_land_s=math.nan if plan.time_to_land_s is None else plan.time_to_land_s,
+        late=(plan.late_by_s or 0.0) > 0.0,  # a late *state* (not only after a fallback)
+    )

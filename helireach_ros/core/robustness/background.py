@@ -28,6 +28,7 @@ from helireach_ros.core.flight.uncertainty import PerturbedModel
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.planning.planner import LandingPlan
 from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings
+from helireach_ros.core.status_contracts import RobustVerdictValues
 
 __all__ = ["BackgroundRobustVerification", "RobustSummary", "summarise_verification"]
 
@@ -58,11 +59,14 @@ class RobustSummary:
 
     def values(self) -> dict[str, Any]:
         """The status values (``robust`` true/false, counts, reason)."""
+        verdict = RobustVerdictValues(
+            robust=self.robust, reason=self.reason, design=self.design, design_size=self.design_size,
+            models_flown=self.models_flown, error=self.error,
+        )  # fmt: skip
         return {
-            "robust": self.robust, "robust_reason": self.reason, "robust_design": self.design,
-            "robust_design_size": self.design_size, "robust_models_flown": self.models_flown,
+            **verdict.to_values(),
             "robust_closed_loop_landed": self.closed_loop_landed, "robust_open_loop_landed": self.open_loop_landed,
-            "robust_seconds": round(self.seconds, 3), "robust_error": self.error,
+            "robust_seconds": round(self.seconds, 3),
         }  # fmt: skip
 
 

@@ -31,6 +31,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset
 from helireach_ros.core.flight.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
+from helireach_ros.core.status_contracts import TouchdownValues
 from helireach_ros.core.units import FT, KT
 from helireach_ros.ros import messages as rm
 from helireach_ros.ros.executors import run_node
@@ -49,20 +50,23 @@ def touchdown_status(report: TouchdownReport, vehicle: SimulatedVehicle, name: s
     """The ``/helireach/touchdown`` message for a touchdown report."""
     limits = vehicle.airframe.limits
     omega0 = vehicle.nominal_airframe.nominal_rotor_speed
+    touchdown = TouchdownValues(
+        within_limits=report.within_limits,
+        descent_rate=report.descent_rate,
+        forward_speed=report.forward_speed,
+        rotor_speed_pct=100.0 * report.rotor_speed / omega0,
+        rotor_speed_within_limits=report.rotor_speed_within_limits,
+        max_descent_rate=limits.max_descent_rate,
+        max_forward_speed=limits.max_forward_speed,
+        time_after_failure_s=report.time_after_failure,
+        reason=report.reason,
+    )
     values = {
-        "within_limits": report.within_limits,
-        "descent_rate_m_s": report.descent_rate,
-        "forward_speed_m_s": report.forward_speed,
+        **touchdown.to_values(),
         "rotor_speed_rad_s": report.rotor_speed,
-        "rotor_speed_pct": 100.0 * report.rotor_speed / omega0,
         "min_rotor_speed_pct": 100.0 * report.min_rotor_speed / omega0,
         "max_rotor_speed_pct": 100.0 * report.max_rotor_speed / omega0,
-        "time_after_failure_s": report.time_after_failure,
         "value": report.value,
-        "rotor_speed_within_limits": report.rotor_speed_within_limits,
-        "max_descent_rate_m_s": limits.max_descent_rate,
-        "max_forward_speed_m_s": limits.max_forward_speed,
-        "reason": report.reason,
         "scenario": vehicle.scenario.name,
     }
     numbers = (
