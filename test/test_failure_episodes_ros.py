@@ -101,7 +101,7 @@ def test_a_flag_flapping_at_100_hz_is_one_episode_with_a_trajectory_while_it_fla
         assert harness.spin_until(lambda: bool(episodes) and rm.status_values(episodes[-1])["phase"] == "failed")
         assert len(events) == 1
         assert {fields["failure_id"] for fields in values_of(plan_statuses)} == {"1"}
-        assert {record.failure_id for record in planner.published_plans} == {1}
+        assert {record.failure_id for record in planner.supervisor.published_plans} == {1}
         episode = EpisodeState.from_values(rm.status_values(episodes[-1]))
         assert (episode.phase, episode.episode_id) == (EpisodePhase.FAILED, 1) and episode.flag_changes > 100
         # the first trajectory is the normal one: the converged plan, or the deadline's fallback, for failure 1
@@ -148,7 +148,7 @@ def test_a_flag_false_for_good_ends_the_episode_after_the_hold_and_replanning_st
         assert episode.phase is EpisodePhase.ENDED
         assert (episode.ended_ns - episode.false_since_ns) * 1e-9 >= hold_s  # only after the hold of steady false
         assert int(fields["ended_stamp_ns"]) == episode.ended_ns
-        assert not planner.failure_active
+        assert not planner.supervisor.failure_active
         # nothing more is planned or published for it
         published, trajectory_count = len(plan_statuses), len(trajectories)
         run_for(harness, 1.0, relit, 0.04)
@@ -249,8 +249,9 @@ def test_a_planner_that_missed_the_event_plans_from_the_episode_and_stops_when_l
         while planner_says("failure_outcome") != "landed" and time.monotonic() < deadline:
             run_for(harness, 0.04, on_the_ground, 0.04)
         assert planner_says("failure_outcome") == "landed" and planner_says("failure_episode") == "landed"
-        assert not planner.failure_active
-        assert planner.published_plans and {record.failure_id for record in planner.published_plans} == {1}
+        assert not planner.supervisor.failure_active
+        published = planner.supervisor.published_plans
+        assert published and {record.failure_id for record in published} == {1}
         assert len(events) == 1  # the flag still true on the ground starts nothing
         # the latched plan status says the episode is over, not the last plan's verdict (a late joiner reads it)
         assert harness.spin_until(lambda: rm.status_values(plan_statuses[-1])["status"] == "landed")
@@ -302,7 +303,7 @@ def test_re_planning_pauses_without_a_rotor_reading_and_says_so(context: Context
     diagnostics = harness.listen(DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS)
     try:
         trigger_failure(harness, HEIGHT, SPEED)
-        assert harness.keep_publishing(HEIGHT, SPEED, until=lambda: planner.published_plans != [])
+        assert harness.keep_publishing(HEIGHT, SPEED, until=lambda: planner.supervisor.published_plans != [])
 
         def odometry_only(_: float) -> None:  # the rotor joint is gone from the vehicle's messages
             harness.odometry.publish(rm.odometry_message(harness.now_ns(), HEIGHT, 0.0, SPEED, 0.0))

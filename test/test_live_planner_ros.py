@@ -106,7 +106,7 @@ def test_on_a_failure_the_first_trajectory_is_the_verified_standby_then_the_refi
         assert (refined["standby"], refined["fallback"], refined["late"]) == ("false", "false", "false")
         assert refined["failure_id"] == first["failure_id"] == "1" and refined["replan_index"] == "0"
         assert int(refined["state_stamp_ns"]) > standby_stamp
-        assert [planner.is_standby(record) for record in planner.published_plans] == [True, False]
+        assert [planner.supervisor.is_standby(record) for record in planner.supervisor.published_plans] == [True, False]
         # live evaluation pauses during the episode ...
         paused_at = len(live)
         stream_until(harness, LEVEL, lambda: False, timeout_s=0.6)
@@ -200,7 +200,7 @@ def test_a_live_plan_older_than_standby_max_age_is_not_published_as_the_standby(
         assert first["standby"] == "false" and first.get("warm_start") != "live", (
             first
         )  # the refined plan or a fallback
-        assert not planner.standby_plans
+        assert not planner.supervisor.standby_plans
     finally:
         harness.close()
 

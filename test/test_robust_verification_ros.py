@@ -56,6 +56,6 @@ def test_the_failure_plan_is_published_pending_and_its_robust_verdict_follows(
             assert verdicts[-1].level == DiagnosticStatus.WARN and verdicts[-1].message.startswith("NOT ROBUST")
             assert values["robust_models_flown"] == "1"  # stopped at the first failing model
             assert "gross_weight+2" in values["robust_reason"]  # the 20 or 25 % heavier model
-        assert planner.published_plans  # the node is still serving
+        assert planner.supervisor.published_plans  # the node is still serving
     finally:
         harness.close()

@@ -179,7 +179,7 @@ def test_a_replayed_failure_drives_fresh_nodes_to_the_logged_plan(demo, no_ros_d
     try:
         replay.start()
         deadline = time.monotonic() + 30.0
-        converged = lambda: [record for record in planner.published_plans if not record.fallback]  # noqa: E731
+        converged = lambda: [record for record in planner.supervisor.published_plans if not record.fallback]  # noqa: E731
         while not (trajectories and converged()) and time.monotonic() < deadline:
             executor.spin_once(timeout_sec=0.05)
         assert trajectories and converged(), "no plan from the replayed failure"

@@ -96,12 +96,13 @@ def test_a_failure_in_the_composed_system_gives_the_prebuilt_standby_then_the_re
         first, refined = vehicle.statuses[0], vehicle.statuses[1]
         assert (first["standby"], first["status"], first["verified"]) == ("true", "safe", "true")
         assert (refined["standby"], refined["fallback"]) == ("false", "false")
-        assert [planner.is_standby(record) for record in planner.published_plans[:2]] == [True, False]
+        supervisor = planner.supervisor
+        assert [supervisor.is_standby(record) for record in supervisor.published_plans[:2]] == [True, False]
         # the standby went out as the very messages built beforehand (the failure callback only published them)
         (trajectory, prebuilt), (path, prebuilt_then) = trajectories[0], paths[0]
         assert prebuilt is not None and prebuilt_then is prebuilt
         assert trajectory is prebuilt.trajectory_cdr and path is prebuilt.path_cdr
-        standby_record = planner.published_plans[0]
+        standby_record = planner.supervisor.published_plans[0]
         assert prebuilt.matches(standby_record.plan, standby_record.stamp_ns, prebuilt.frame, prebuilt.world_frame)
         assert int(first["state_stamp_ns"]) == prebuilt.stamp_ns
         assert vehicle.trajectories[0] == prebuilt.trajectory

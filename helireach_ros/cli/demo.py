@@ -173,11 +173,12 @@ def run_demo(
             result.touchdown = sim.touchdown
             result.planned_weight = planner.episode_weight if planner.planner is not None else None
             result.file_gross_weight = planner.airframe.gross_weight if planner.planner is not None else math.nan
-            result.plans = [record for record in planner.published_plans if record.failure_id == 1]
+            supervisor = planner.supervisor
+            result.plans = [record for record in supervisor.published_plans if record.failure_id == 1]
             result.robust_verdicts = [summary for key, summary in planner.robust_verdicts if key[0] == 1]
-            standby = [record for record in result.plans if planner.is_standby(record)]
+            standby = [record for record in result.plans if supervisor.is_standby(record)]
             result.standby_plan = standby[0] if standby else None
-            converged = [record for record in result.plans if not record.fallback and not planner.is_standby(record)]
+            converged = [record for record in result.plans if not record.fallback and not supervisor.is_standby(record)]
             result.first_plan = converged[0] if converged else (result.plans[0] if result.plans else None)
             result.track = np.array(
                 [[state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED]] for _, state in sim.vehicle.history]

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
@@ -33,6 +33,10 @@ from helireach_ros.core.policies.vehicle_readings import CurrentState, LatestRea
 from helireach_ros.core.workers.live_scheduling import LiveScheduler
 from helireach_ros.core.workers.planner_backend import PlannerBackend
 
+if TYPE_CHECKING:
+    from helireach_ros.core.planning.planner import LandingPlan
+    from helireach_ros.core.policies.live_reachability import AnyWarmStart
+
 __all__ = ["FailurePlanner", "PlanSink", "RobustKey", "controls_from_stamp"]
 
 RobustKey = tuple[int, int, int]
@@ -43,7 +47,7 @@ class PlanSink(Protocol):
     """Where a :class:`FailurePlanner` publishes (the planner node's publishers)."""
 
     def publish_plan(
-        self, failure: FailureEpisode, plan: Any, current: CurrentState, warm_source: str, *, replan: bool,
+        self, failure: FailureEpisode, plan: LandingPlan, current: CurrentState, warm_source: str, *, replan: bool,
         robust_pending: bool,
     ) -> None:  # fmt: skip
         """A converged plan (safe, unverified or unsafe), if the supervisor allows it."""
@@ -61,7 +65,7 @@ class PlanSink(Protocol):
         """A line for the operator (``"info"``, ``"warning"``, ``"error"``), at most every ``throttle_s``."""
 
 
-def controls_from_stamp(plan: Any, stamp_ns: int) -> Callable[[float], np.ndarray]:
+def controls_from_stamp(plan: LandingPlan, stamp_ns: int) -> Callable[[float], np.ndarray]:
     """A plan's controls as a function of time in seconds (the plan starts at its state's stamp)."""
     start = stamp_ns * 1e-9
     return lambda time: plan.controls_at([time - start])[:, 0]
@@ -142,11 +146,11 @@ class FailurePlanner:
     def solve(
         self,
         state: np.ndarray,
-        warm_start: Any,
+        warm_start: AnyWarmStart,
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
-    ) -> tuple[Any | None, str]:
+    ) -> tuple[LandingPlan | None, str]:
         """A failure plan or re-plan for the episode's weight (blocking): (plan, "") or (None, why not)."""
         if self.backend is None:
             return None, self.not_configured
@@ -185,7 +189,7 @@ class FailurePlanner:
             failure.disturbance = DisturbanceTracker(model, self._disturbance)
             failure.disturbance.update(stamp_ns * 1e-9, state, controls_from_stamp(plan, stamp_ns))  # 1st interval
 
-    def _submit_robust(self, failure: FailureEpisode, plan: Any, stamp_ns: int) -> None:
+    def _submit_robust(self, failure: FailureEpisode, plan: LandingPlan, stamp_ns: int) -> None:
         """Queues the plan's robust verification (its verdict is pending until it comes back)."""
         assert self.backend is not None and self.backend.robust is not None  # called only with robust verification
         key = (failure.failure_id, failure.event_stamp_ns, stamp_ns)
@@ -229,9 +233,8 @@ class FailurePlanner:
         tracker = failure.disturbance
         disturbance = tracker.update(stamp_ns * 1e-9, state, flown) if tracker is not None else None
         plan, error = self.solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
-        converged = plan is not None and plan.solver.success
-        self.supervisor.replan_solved(failure, converged=converged)
-        if not converged:
+        self.supervisor.replan_solved(failure, converged=plan is not None and plan.solver.success)
+        if plan is None or not plan.solver.success:
             reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self._sink.report("warning", f"re-plan failed ({reason}); keeping the current plan", throttle_s=1.0)
             return

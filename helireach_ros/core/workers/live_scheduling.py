@@ -24,7 +24,7 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,6 +34,10 @@ from helireach_ros.core.policies.plan_status import StatusReport, live_report
 from helireach_ros.core.policies.vehicle_readings import CurrentState, RotorSource
 from helireach_ros.core.workers.planner_backend import PlannerBackend
 from helireach_ros.core.workers.solver_thread import SolverThread
+
+if TYPE_CHECKING:
+    from helireach_ros.core.planning.planner import LandingPlan
+    from helireach_ros.core.policies.live_reachability import AnyWarmStart
 
 __all__ = ["LiveScheduler", "StandbyPlan"]
 
@@ -52,7 +56,7 @@ class StandbyPlan:
     verdict: LiveVerdict
     frame: str
     weight: WeightChoice
-    messages: Any
+    messages: object | None
 
 
 class LiveScheduler:
@@ -76,7 +80,7 @@ class LiveScheduler:
         solver_thread: SolverThread,
         clock_ns: Callable[[], int],
         publish_verdict: Callable[[StatusReport], None],
-        prepare_standby: Callable[[Any, int, str], Any],
+        prepare_standby: Callable[[LandingPlan, int, str], object],
     ) -> None:
         self.settings = settings
         self.evaluator = LiveEvaluator(settings)
@@ -90,7 +94,7 @@ class LiveScheduler:
         self._generation = 0
         self._standby_frame = ""
         self._standby_weight: WeightChoice | None = None
-        self._standby_messages: Any = None
+        self._standby_messages: object | None = None
         self.latest_weight: WeightChoice | None = None  # the weight the latest evaluation was started for
 
     @property
@@ -99,7 +103,7 @@ class LiveScheduler:
         return self._lock
 
     @property
-    def standby_messages(self) -> Any:
+    def standby_messages(self) -> object | None:
         """The standby verdict's prepared messages (None: none yet)."""
         with self._lock:
             return self._standby_messages
@@ -141,7 +145,7 @@ class LiveScheduler:
         self._solver_thread.submit(self._solve_in_process, done, failure_now, warm_start, weight)
 
     def _solve_in_process(
-        self, done: Callable[[Future], None], state: np.ndarray, warm_start: Any, weight: WeightChoice
+        self, done: Callable[[Future], None], state: np.ndarray, warm_start: AnyWarmStart, weight: WeightChoice
     ) -> None:
         """Without a pool: the live solve on the solver thread (the cold check, as in the workers)."""
         future: Future = Future()
@@ -183,7 +187,8 @@ class LiveScheduler:
                     now_ns=self._clock_ns(),
                 )
                 self._publish_verdict(report)
-            if standby:  # its messages now, off the executor and outside the lock: the failure only publishes them
+            # its messages now, off the executor and outside the lock: the failure only publishes them
+            if standby and verdict.plan is not None:
                 messages = self._prepare_standby(verdict.plan, stamp_ns, frame)
                 with self._lock:
                     if generation == self._generation:

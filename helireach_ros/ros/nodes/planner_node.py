@@ -13,7 +13,7 @@ Run: ``python -m helireach_ros.ros.nodes.planner_node`` (or the ``helireach_plan
 from __future__ import annotations
 
 from functools import partial
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -50,6 +50,16 @@ from helireach_ros.ros.parameters import declare_aircraft, declare_parameters
 from helireach_ros.ros.plan_messages import PlanMessages, plan_messages
 from helireach_ros.ros.qos import QosWatch
 
+if TYPE_CHECKING:
+    from rclpy.publisher import Publisher
+
+    from helireach_ros.core.aircraft.airframe import Airframe
+    from helireach_ros.core.envelope.data import Envelope
+    from helireach_ros.core.ocp.settings import PlannerSettings
+    from helireach_ros.core.planning.planner import LandingPlan, LandingPlanner
+    from helireach_ros.core.robustness.background import RobustSummary
+    from helireach_ros.core.workers.solver_pool import SolverPool
+
 __all__ = ["LandingPlannerNode", "main"]
 
 _PLAN_HISTORY = 200  # robust verdicts kept for inspection (demo, tests)
@@ -67,7 +77,7 @@ class LandingPlannerNode(Node):
         self.config = config = declare_parameters(self, PlannerParameters)
         self.supervisor = LandingSupervisor(config.supervisor_settings())
         self.solver_thread = SolverThread(self.get_logger().error)
-        self.robust_verdicts: list[tuple[RobustKey, Any | None]] = []  # published: (key, summary|None)
+        self.robust_verdicts: list[tuple[RobustKey, RobustSummary | None]] = []  # published: (key, summary|None)
         self._backend: PlannerBackend | None = None  # None = not configured (a broken airframe or settings file)
         self.readings: LatestReadings | None = None
         setup_error = ""
@@ -83,7 +93,7 @@ class LandingPlannerNode(Node):
             zero_power=config.assume_total_power_loss, disturbance=config.disturbance_settings(),
         )  # fmt: skip
 
-        def latched(message_type: Any, topic: str) -> Any:
+        def latched(message_type: Any, topic: str) -> Publisher:
             return self.create_publisher(message_type, topic, rm.LATCHED_QOS, **rm.NO_QOS_EVENTS_PUBLISHER)
 
         self._trajectory_publisher = latched(JointTrajectory, rm.TOPIC_LANDING_TRAJECTORY)
@@ -122,7 +132,7 @@ class LandingPlannerNode(Node):
             self.create_timer(1.0 / self.live.settings.rate_hz, self._on_live_timer)
 
     # -- startup -----------------------------------------------------------------------------------------------
-    def _start_backend(self, airframe: Any, settings: Any) -> None:
+    def _start_backend(self, airframe: Airframe, settings: PlannerSettings) -> None:
         """Loads the envelope, starts the solver pool (or builds the NLP here and warms it up), the estimators."""
         logger = self.get_logger()
         report = {"error": logger.error, "warning": logger.warning, "info": logger.info}
@@ -140,12 +150,12 @@ class LandingPlannerNode(Node):
         )
 
     @property
-    def planner(self) -> Any | None:
+    def planner(self) -> LandingPlanner | SolverPool | None:
         """The in-process LandingPlanner or the SolverPool; None: not configured (a broken airframe or settings)."""
         return self._backend.planner if self._backend is not None else None
 
     @property
-    def envelope(self) -> Any | None:
+    def envelope(self) -> Envelope | None:
         """The envelope used for warm starts and fallbacks (None: none usable)."""
         return self._backend.envelope if self._backend is not None else None
 
@@ -205,12 +215,11 @@ class LandingPlannerNode(Node):
             return
         self.failures.fix_weight(self.live.latest_weight if self.live is not None else None)
         standby = self.live.pause(failure_stamp_ns) if self.live is not None else None
-        if standby is not None:
+        if standby is not None and (plan := standby.verdict.plan) is not None:
             verdict = standby.verdict
             current = CurrentState(verdict.state, verdict.state_stamp_ns, standby.frame, RotorSource.MEASURED)
-            self.publish_plan(
-                failure, verdict.plan, current, "live", replan=False, standby=standby.weight, messages=standby.messages
-            )
+            messages = standby.messages if isinstance(standby.messages, PlanMessages) else None
+            self.publish_plan(failure, plan, current, "live", replan=False, standby=standby.weight, messages=messages)
         if self._backend is None:
             self.publish_no_plan(failure, self.failures.not_configured)
             return
@@ -253,17 +262,12 @@ class LandingPlannerNode(Node):
         throttle = {"throttle_duration_sec": throttle_s} if throttle_s > 0.0 else {}
         getattr(self.get_logger(), level)(text, **throttle)
 
-    def fallback_plan(self, state: np.ndarray) -> FallbackPlan:
-        """The best available controls without a converged solve
-        (:func:`helireach_ros.core.planning.fallback.fallback_plan`)."""
-        if self._backend is None:
-            raise RuntimeError(self.failures.not_configured)
-        return self._backend.fallback_plan(state)
-
     def publish_fallback(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, reason: str) -> None:
         """Publishes the fallback for ``state`` if the supervisor allows it (else says there is none)."""
         try:
-            fallback = self.fallback_plan(state)
+            if self._backend is None:
+                raise RuntimeError(self.failures.not_configured)
+            fallback = self._backend.fallback_plan(state)
         except Exception as error:  # the last resort must not take the node down
             self.publish_no_plan(failure, f"{reason}; no fallback available ({error})")
             return
@@ -298,7 +302,7 @@ class LandingPlannerNode(Node):
             self.airframe.name, self.airframe.gross_weight, self.airframe.density_altitude, envelope_id
         )
 
-    def _publish(self, publisher: Any, what: str, report: StatusReport) -> None:
+    def _publish(self, publisher: Publisher, what: str, report: StatusReport) -> None:
         """Publishes a status report as ``<node>: <what>``."""
         hardware_id = self.airframe.name if self._backend is not None else "helireach"
         level = rm.DIAGNOSTIC_LEVELS[report.level]
@@ -306,7 +310,14 @@ class LandingPlannerNode(Node):
         publisher.publish(rm.diagnostic_status(level, name, report.text, hardware_id, report.values))
 
     def _record(
-        self, failure: FailureEpisode, plan: Any, stamp_ns: int, warm_source: str, *, fallback: bool, since_ns: int
+        self,
+        failure: FailureEpisode,
+        plan: LandingPlan | FallbackPlan,
+        stamp_ns: int,
+        warm_source: str,
+        *,
+        fallback: bool,
+        since_ns: int,
     ) -> PublishedPlan:
         """The record of a publication now (its latency counted from ``since_ns``)."""
         now_ns = self._now_ns()
@@ -318,7 +329,7 @@ class LandingPlannerNode(Node):
     def publish_plan(
         self,
         failure: FailureEpisode,
-        plan: Any,
+        plan: LandingPlan,
         current: CurrentState,
         warm_source: str,
         *,
@@ -379,7 +390,7 @@ class LandingPlannerNode(Node):
             text = "robust" if summary.robust else f"NOT robust: {summary.reason}"
             fast_logging.info(self.get_logger(), f"failure #{key[0]}: first plan {text} ({summary.seconds:.1f} s)")
 
-    def _publish_robust(self, key: RobustKey, summary: Any | None) -> None:
+    def _publish_robust(self, key: RobustKey, summary: RobustSummary | None) -> None:
         """The robust verdict of a failure plan (a RobustSummary), or None: pending."""
         robust = self._backend.robust if self._backend is not None else None
         design = robust.design if robust is not None else ""
@@ -396,28 +407,9 @@ class LandingPlannerNode(Node):
 
     # -- inspection and shutdown ---------------------------------------------------------------------------------
     @property
-    def failure_active(self) -> bool:
-        """A failure is being handled and the closed loop has not ended."""
-        return self.supervisor.failure_active
-
-    @property
     def solving(self) -> bool:
         """A solve is pending or running on the solver thread."""
         return self.solver_thread.busy
-
-    def is_standby(self, record: PublishedPlan) -> bool:
-        """Whether a published plan is a standby plan (a live verdict's plan published on the failure)."""
-        return self.supervisor.is_standby(record)
-
-    @property
-    def published_plans(self) -> list[PublishedPlan]:
-        """The plans published (the latest ``history``), oldest first."""
-        return self.supervisor.published_plans
-
-    @property
-    def standby_plans(self) -> list[PublishedPlan]:
-        """The standby plans published, oldest first."""
-        return self.supervisor.standby_plans
 
     def destroy_node(self) -> None:
         """Stops the solver workers (their jobs fail), lets a running in-process solve finish (queued ones are
