@@ -12,11 +12,22 @@ Levels follow ``diagnostic_msgs/DiagnosticStatus`` by name (the ROS layer maps t
 
 from __future__ import annotations
 
+from enum import StrEnum
 from typing import Any
 
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.units import FT, KT
 
-__all__ = ["plan_verdict"]
+__all__ = ["PlanStatus", "plan_verdict"]
+
+
+class PlanStatus(StrEnum):
+    """What the solve and its independent replay say of a landing plan (a str: ``"safe"`` etc. on the wire)."""
+
+    SAFE = "safe"  # NLP value ≤ 0 and the replay lands within limits: the only status that is evidence
+    UNSAFE = "unsafe"  # value > 0: no landing within limits exists in the model, the plan is the best effort
+    UNVERIFIED = "unverified"  # value ≤ 0 but the replay does not land within limits
+    FAILED = "failed"  # the solver did not converge: nothing is known
 
 
 def plan_verdict(plan: Any, rotor_source: str) -> tuple[str, str]:
@@ -28,13 +39,14 @@ def plan_verdict(plan: Any, rotor_source: str) -> tuple[str, str]:
     """
     touchdown = plan.replay.touchdown_state
     summary = (
-        f"land in {plan.time_to_land:.1f} s at {touchdown[0] / FT:.1f} ft/s, {touchdown[1] / KT:.1f} kt "
+        f"land in {plan.time_to_land:.1f} s at {touchdown[StateIndex.DESCENT_RATE] / FT:.1f} ft/s, "
+        f"{touchdown[StateIndex.FORWARD_SPEED] / KT:.1f} kt "
         f"(value {plan.value:+.2f})"
     )
     if plan.safe and rotor_source == "measured":
         return "OK", f"SAFE: {summary}"
     if plan.safe:
         return "WARN", f"SAFE if the rotor speed is nominal (not measured): {summary}"
-    if plan.status == "unverified":
+    if plan.status == PlanStatus.UNVERIFIED:
         return "WARN", f"NOT VERIFIED: the replay does not land within limits; {summary}"
     return "ERROR", f"UNSAFE: no safe landing, best effort; {summary}"

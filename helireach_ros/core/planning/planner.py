@@ -30,6 +30,7 @@ from helireach_ros.core.aircraft.model import (
     trim_controls,
 )
 from helireach_ros.core.aircraft.state_index import StateIndex
+from helireach_ros.core.evidence.plan_verdict import PlanStatus
 from helireach_ros.core.evidence.replay import (
     ReplaySummary,
     control_function,
@@ -57,7 +58,7 @@ __all__ = [
     "plan_landing",
 ]
 
-STATUSES = ("safe", "unsafe", "unverified", "failed")
+STATUSES = tuple(PlanStatus)
 TRANSCRIPTIONS: dict[str, type[Transcription]] = {
     "flyable": FlyableTranscription,
     "verified": VerifiedTranscription,
@@ -143,7 +144,7 @@ class LandingPlan:
     """
 
     method: str
-    status: str
+    status: PlanStatus
     value: float
     initial_state: np.ndarray
     time_to_land: float
@@ -162,10 +163,14 @@ class LandingPlan:
     reaction_delay_s: float = 0.0
     disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
+    def __post_init__(self) -> None:
+        # a plan decoded from a worker's bytes carries its status as a plain string: the same status, typed
+        object.__setattr__(self, "status", PlanStatus(self.status))
+
     @property
     def safe(self) -> bool:
         """NLP value ≤ 0 and the replay confirmed the landing."""
-        return self.status == "safe"
+        return self.status == PlanStatus.SAFE
 
     @property
     def verified(self) -> bool:
@@ -349,13 +354,13 @@ class LandingPlanner:
         if decided_by_replay:
             value = replay.value
         if not solver_stats.success:
-            status = "failed"
+            status = PlanStatus.FAILED
         elif value > 0.0:
-            status = "unsafe"
+            status = PlanStatus.UNSAFE
         elif not replay.lands_within_limits:
-            status = "unverified"
+            status = PlanStatus.UNVERIFIED
         else:
-            status = "safe"
+            status = PlanStatus.SAFE
         return LandingPlan(
             method=self.settings.method,
             status=status,

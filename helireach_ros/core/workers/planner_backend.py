@@ -263,8 +263,9 @@ class PlannerBackend:
                 planner = self.in_process_planner(gross_weight)
                 return planner.plan(state, warm_start, initial_control, delay, disturbance=disturbance), ""
             future = self.pool.submit(
-                state, warm_start, PRIORITY_FAILURE, timeout_s, False, initial_control, delay, gross_weight, disturbance
-            )
+                state, warm_start, priority=PRIORITY_FAILURE, timeout_s=timeout_s, initial_control=initial_control,
+                reaction_delay_s=delay, gross_weight=gross_weight, disturbance=disturbance,
+            )  # fmt: skip
             try:
                 # The pool fails the job solve_timeout after a worker took it; the extra wait covers the queue.
                 return future.result(timeout=timeout_s + _QUEUE_WAIT_S), ""
@@ -284,8 +285,9 @@ class PlannerBackend:
             raise RuntimeError("live jobs go to the pool only; without one they are solved with solve_live")
         timeout_s = _LIVE_TIMEOUT_FACTOR * self.backend.solve_timeout_s
         return self.pool.submit(
-            state, warm_start, PRIORITY_LIVE, timeout_s, True, None, self.reaction_delay_s, gross_weight
-        )
+            state, warm_start, priority=PRIORITY_LIVE, timeout_s=timeout_s, cold_check=True,
+            reaction_delay_s=self.reaction_delay_s, gross_weight=gross_weight,
+        )  # fmt: skip
 
     def solve_live(self, state: np.ndarray, warm_start: Any, gross_weight: float) -> Any:
         """A live evaluation in this process (the cold check, as in the workers); the weight is built if new."""

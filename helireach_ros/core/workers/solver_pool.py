@@ -305,6 +305,7 @@ class SolverPool:
         self,
         state: np.ndarray,
         warm_start: WarmStart | ControlFunctionWarmStart | None = None,
+        *,
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
         cold_check: bool = False,
@@ -348,6 +349,7 @@ class SolverPool:
         self,
         state: np.ndarray,
         warm_start: WarmStart | ControlFunctionWarmStart | None = None,
+        *,
         priority: int = PRIORITY_FAILURE,
         timeout_s: float | None = None,
         **request: Any,
@@ -358,7 +360,7 @@ class SolverPool:
         restarts): beyond it :class:`SolverWorkerError`, so a caller never waits for ever.
         """
         timeout = timeout_s or self.pool_settings.default_timeout_s
-        future = self.submit(state, warm_start, priority, timeout, **request)
+        future = self.submit(state, warm_start, priority=priority, timeout_s=timeout, **request)
         try:
             return future.result(timeout=timeout + QUEUE_WAIT_LIMIT_S)
         except FutureTimeoutError:
