@@ -62,6 +62,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--density-altitude-ft", type=float, default=None, help="override the density altitude [ft]")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--plot", default=None, metavar="FILE.png", help="write the trajectory figure")
+    parser.add_argument(
+        "--footprint",
+        action="store_true",
+        help="also the reachable footprint: the nearest and farthest replay-verified touchdown (two more NLPs)",
+    )
     parser.set_defaults(handler=run_plan)
 
 
@@ -82,6 +87,12 @@ def run_plan(arguments: argparse.Namespace) -> int:
         )
         state = _state(arguments, airframe)
         plan = plan_landing(state, airframe, settings)
+        footprint = None
+        if arguments.footprint:
+            from helireach_ros.core.planning.footprint import reachable_footprint
+
+            warm = (plan.warm_start,) if plan.solver.success else ()
+            footprint = reachable_footprint(state.as_array(), airframe, settings, warm_starts=warm)
     except (ConfigError, ValueError) as error:
         print(f"helireach plan: error: {error}", file=sys.stderr)
         return 2
@@ -94,6 +105,11 @@ def run_plan(arguments: argparse.Namespace) -> int:
         summary = plan.to_dict()
         summary["airframe"] = airframe.name
         summary["airframe_digest"] = airframe.digest()
+        if footprint is not None:
+            summary["footprint"] = {
+                "reachable": footprint.reachable, "nearest_m": _finite(footprint.nearest_m),
+                "farthest_m": _finite(footprint.farthest_m), "plans_tried": len(footprint.tried),
+            }  # fmt: skip
         print(json.dumps(summary))
     else:
         touchdown = plan.replay.touchdown_state
@@ -108,9 +124,28 @@ def run_plan(arguments: argparse.Namespace) -> int:
             f"  IPOPT {plan.solver.status}, {plan.solver.iterations} iterations, {plan.solver.solve_time_ms:.0f} ms\n"
             f"  {_flyability_line(plan)}"
         )
+        if footprint is not None:
+            print(f"  {_footprint_line(footprint)}")
         if arguments.plot:
             print(f"  figure: {arguments.plot}")
     return 0 if plan.safe else 1
+
+
+def _finite(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def _footprint_line(footprint) -> str:
+    """The footprint's ends in feet from the failure, or which end no verified landing reaches."""
+    from helireach_ros.core.units import FT
+
+    def end(name: str, plan, distance_m: float) -> str:
+        return f"{name} {distance_m / FT:.0f} ft" if plan is not None else f"{name}: no verified landing"
+
+    nearest = end("nearest", footprint.nearest, footprint.nearest_m)
+    farthest = end("farthest", footprint.farthest, footprint.farthest_m)
+    tried = len(footprint.tried)
+    return f"footprint: touchdown {nearest}, {farthest} from here (each end replay-verified; {tried} NLPs)"
 
 
 def _flyability_line(plan) -> str:

@@ -12,11 +12,13 @@ import yaml
 from helireach_ros.core.aircraft.airframe import ConfigError
 from helireach_ros.core.resources import config_path
 
-__all__ = ["METHODS", "OBJECTIVES", "PlannerSettings", "load_settings"]
+__all__ = ["FOOTPRINT_OBJECTIVES", "METHODS", "OBJECTIVES", "PlannerSettings", "load_settings"]
 
 METHODS = ("flyable", "verified", "paper")
-OBJECTIVES = ("terminal", "reach_avoid")
+OBJECTIVES = ("terminal", "reach_avoid", "nearest_touchdown", "farthest_touchdown")
 """What the flyable NLP minimises (:attr:`PlannerSettings.objective`)."""
+FOOTPRINT_OBJECTIVES = ("nearest_touchdown", "farthest_touchdown")
+"""The objectives of the reachable footprint's two ends (:mod:`~helireach_ros.core.planning.footprint`)."""
 
 
 @dataclass(frozen=True)
@@ -62,7 +64,13 @@ class PlannerSettings:
             normalised margins of the rotor-speed limits along the path and of the touchdown attitude (each 0 at its
             limit, −1 the airframe's ``margin_scales`` inside it; :mod:`~helireach_ros.core.ocp.transcription.flyable`),
             so a plan keeps its worst margin as large as it can instead of riding the limits. The limits stay hard
-            constraints either way, so the same states are safe (value ≤ 0). Other methods: always ``"terminal"``.
+            constraints either way, so the same states are safe (value ≤ 0). ``"nearest_touchdown"`` and
+            ``"farthest_touchdown"``: the touchdown distance z(T) minimised or maximised subject to a safe touchdown
+            (J ≤ −``footprint_margin`` a constraint): the ends of the reachable footprint. Other methods: always
+            ``"terminal"``.
+        footprint_margin: how far inside the touchdown limits a footprint end lands (J ≤ −margin; 0.05 = 5 % of
+            the nearest touchdown limit, the live status's caution threshold, so that an end is never a landing the
+            status would call marginal; assumed). The end at J = 0 exactly would ride the limit.
         closed_form_states: verified and flyable: the distance z and the engine power P are not decision
             variables but their collocation solutions in closed form (z the quadrature of v, P the solution
             of Ṗ = −P/τ), which satisfy their collocation equations exactly; neither feeds back into the
@@ -91,6 +99,7 @@ class PlannerSettings:
     reaction_delay_s: float = 0.0
     closed_form_states: bool = True
     objective: str = "terminal"
+    footprint_margin: float = 0.05
 
     def __post_init__(self) -> None:
         problems = []
@@ -98,6 +107,8 @@ class PlannerSettings:
             problems.append(f"method must be one of {METHODS}, got {self.method!r}")
         if self.objective not in OBJECTIVES:
             problems.append(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
+        elif self.objective in FOOTPRINT_OBJECTIVES and self.method != "flyable":
+            problems.append(f"objective {self.objective!r} needs the flyable method, got {self.method!r}")
         integer_ranges: tuple[tuple[str, int, int], ...] = (
             ("intervals", 1, 1000),
             ("degree", 1, 9),
@@ -122,6 +133,7 @@ class PlannerSettings:
             ("rotor_speed_backoff", 0.0, 0.1),
             ("rotor_speed_replay_margin", 0.0, 0.1),
             ("reaction_delay_s", 0.0, 10.0),
+            ("footprint_margin", 0.0, 0.5),
         )
         for name, real_low, real_high in real_ranges:
             value = getattr(self, name)

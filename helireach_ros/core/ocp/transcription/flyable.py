@@ -46,6 +46,7 @@ import numpy as np
 
 from helireach_ros.core.aircraft.smooth import smooth_positive
 from helireach_ros.core.aircraft.state_index import StateIndex
+from helireach_ros.core.ocp.settings import FOOTPRINT_OBJECTIVES
 from helireach_ros.core.ocp.transcription.base import DecodedPlan
 from helireach_ros.core.ocp.transcription.verified import _TIME_SCALE, VerifiedTranscription
 
@@ -57,6 +58,8 @@ TOUCHDOWN_ATTITUDE_MARGIN = np.radians(0.5)  # rad the NLP keeps θ(T) inside th
 RATE_BACKOFF = 0.01  # the NLP plans at 99 % of the rate limits: IPOPT meets constraints to 1e-4, the replay to 1e-6
 _BACKOFF_RAMP_S = 1.0  # s over which the rotor back-off grows from 0 to all of it
 _ROTOR_STEP_WIDTH = 0.1  # m: width of the step from the in-flight to the touchdown rotor-speed limit
+# m: the footprint objectives' unit of distance (so that metres of touchdown distance weigh ~100 x the smoothness term)
+_DISTANCE_SCALE = 100.0
 
 
 class FlyableTranscription(VerifiedTranscription):
@@ -130,7 +133,14 @@ class FlyableTranscription(VerifiedTranscription):
             )
 
         scaled_controls = breakpoints / ca.repmat(control_scale, 1, intervals + 1)
-        self.objective = slack + settings.smoothness_weight * self.smoothness(scaled_controls)
+        smoothness = settings.smoothness_weight * self.smoothness(scaled_controls)
+        if settings.objective in FOOTPRINT_OBJECTIVES:
+            # the touchdown distance from the start, in _DISTANCE_SCALE units, with J ≤ 0 held by the slack's bound
+            sign = 1.0 if settings.objective == "nearest_touchdown" else -1.0
+            travelled = physical_states[StateIndex.DISTANCE, -1] - self.initial_state[StateIndex.DISTANCE]
+            self.objective = sign * travelled / _DISTANCE_SCALE + smoothness
+        else:
+            self.objective = slack + smoothness
         self.constraints = ca.vertcat(
             residuals,
             self.epigraph(slack, terminal_scaled),
@@ -164,8 +174,10 @@ class FlyableTranscription(VerifiedTranscription):
         window_low, window_high = self._touchdown_window()
         control_low[-1] = window_low / self.control_scale[1]
         control_high[-1] = window_high / self.control_scale[1]
+        # the slack's bound: free above the terminal terms, or J ≤ −margin itself for the footprint's ends
+        slack_high = -settings.footprint_margin if settings.objective in FOOTPRINT_OBJECTIVES else 1e3
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
-        self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, 1e3], control_high, state_high])
+        self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, slack_high], control_high, state_high])
 
     def _path_margins(self, *, rotor_ratio, floor, ceiling_backoff, touchdown_pitch) -> list:
         """The reach-avoid value's path and touchdown margins, each 0 at its limit (as the NLP holds it, back-off

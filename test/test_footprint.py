@@ -1,0 +1,64 @@
+"""The reachable footprint (core/planning/footprint.py): the nearest and farthest replay-verified touchdowns from a
+state, real IPOPT and the independent replay; and ``helireach plan --footprint`` as users run it."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+
+from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.evidence.plan_verdict import PlanStatus
+from helireach_ros.core.ocp.settings import load_settings
+from helireach_ros.core.planning.footprint import reachable_footprint, touchdown_distance
+from helireach_ros.core.planning.planner import plan_landing
+from helireach_ros.core.units import FT, KT
+
+
+@pytest.fixture(scope="module")
+def airframe():
+    return load_airframe("uh60a_class")
+
+
+def test_from_500_ft_and_75_kt_both_ends_land_inside_the_limits_around_the_touchdown_cost_plan(airframe) -> None:
+    settings = load_settings()
+    state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+    plan = plan_landing(state, airframe, settings)
+    footprint = reachable_footprint(state, airframe, settings, warm_starts=(plan.warm_start,))
+    assert footprint.reachable and footprint.nearest is not None and footprint.farthest is not None
+    for end in (footprint.nearest, footprint.farthest):
+        assert end.status is PlanStatus.SAFE and end.replay.lands_within_limits and end.verified
+        assert end.value <= -settings.footprint_margin + 1e-6  # an end rides no limit
+    assert footprint.nearest_m < touchdown_distance(plan) < footprint.farthest_m
+    assert footprint.farthest_m - footprint.nearest_m > 100 * FT  # a choice of where to land, not a point
+    assert footprint.covers(footprint.nearest_m - 10.0, footprint.nearest_m + 10.0)
+    assert not footprint.covers(footprint.farthest_m + 1.0, footprint.farthest_m + 100.0)
+    assert len(footprint.tried) == 4  # each end warm from the plan, and cold
+
+
+def test_a_state_with_no_safe_landing_has_no_footprint(airframe) -> None:
+    state = initial_state_after_failure(airframe, 150 * FT, 0 * KT).as_array()  # the dead man's zone
+    footprint = reachable_footprint(state, airframe, load_settings())
+    assert not footprint.reachable and footprint.nearest is None and footprint.farthest is None
+    assert math.isnan(footprint.nearest_m) and math.isnan(footprint.farthest_m)
+    assert not footprint.covers(0.0, 1e6) and footprint.tried and not any(plan.safe for plan in footprint.tried)
+
+
+def test_the_footprint_objectives_need_the_flyable_method() -> None:
+    with pytest.raises(ConfigError, match="needs the flyable method"):
+        load_settings(method="paper", objective="farthest_touchdown")
+    with pytest.raises(ConfigError, match="footprint_margin"):
+        load_settings(footprint_margin=-0.1)
+
+
+def test_plan_footprint_prints_both_ends_in_json() -> None:
+    command = [sys.executable, "-m", "helireach_ros.cli.main", "plan", "--height-ft", "500", "--speed-kt", "75"]
+    result = subprocess.run([*command, "--footprint", "--json"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stderr
+    footprint = json.loads(result.stdout)["footprint"]
+    assert footprint["reachable"] is True and footprint["plans_tried"] == 4
+    assert 0.0 < footprint["nearest_m"] < footprint["farthest_m"]
