@@ -15,7 +15,7 @@ from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.evidence.plan_verdict import PlanStatus
 from helireach_ros.core.ocp.settings import load_settings
 from helireach_ros.core.planning.footprint import reachable_footprint, touchdown_distance
-from helireach_ros.core.planning.planner import plan_landing
+from helireach_ros.core.planning.planner import get_planner, plan_landing
 from helireach_ros.core.units import FT, KT
 
 
@@ -62,3 +62,35 @@ def test_plan_footprint_prints_both_ends_in_json() -> None:
     footprint = json.loads(result.stdout)["footprint"]
     assert footprint["reachable"] is True and footprint["plans_tried"] == 4
     assert 0.0 < footprint["nearest_m"] < footprint["farthest_m"]
+
+
+def test_a_site_inside_the_footprint_is_landed_on_and_the_replay_judges_the_sites_ends(airframe) -> None:
+    settings = load_settings(objective="site")
+    state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+    window = (1500 * FT, 1700 * FT)
+    plan = get_planner(airframe, settings).plan(state, touchdown_window=window)
+    assert plan.status is PlanStatus.SAFE and plan.touchdown_window == window
+    assert window[0] <= touchdown_distance(plan) <= window[1]
+    assert plan.replay.lands_within_limits
+
+
+def test_a_site_is_given_with_the_site_objective_only_and_as_an_ordered_finite_pair(airframe) -> None:
+    state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+    site = get_planner(airframe, load_settings(objective="site"))
+    with pytest.raises(ValueError, match="needs a touchdown_window"):
+        site.plan(state)
+    with pytest.raises(ValueError, match="start <= end"):
+        site.plan(state, touchdown_window=(500.0, 400.0))
+    with pytest.raises(ValueError, match="needs the site objective"):
+        get_planner(airframe, load_settings()).plan(state, touchdown_window=(400.0, 500.0))
+
+
+def test_plan_site_outside_the_footprint_is_not_reachable_and_names_the_nearest_reachable_touchdown() -> None:
+    command = [sys.executable, "-m", "helireach_ros.cli.main", "plan", "--height-ft", "500", "--speed-kt", "75"]
+    result = subprocess.run([*command, "--site-ft", "4000:4200", "--json"], capture_output=True, text=True, timeout=300)
+    assert result.returncode == 1, result.stderr
+    summary = json.loads(result.stdout)
+    site, footprint = summary["site"], summary["footprint"]
+    assert site["reachable"] is False and site["landed"] is False and site["touchdown_ft"] is None
+    assert site["nearest_reachable_ft"] == pytest.approx(footprint["farthest_m"] / FT)
+    assert summary["safe"] is True  # the state itself can land: off the site, which the site answer says apart

@@ -67,11 +67,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="also the reachable footprint: the nearest and farthest replay-verified touchdown (two more NLPs)",
     )
+    parser.add_argument(
+        "--site-ft",
+        type=_site,
+        default=None,
+        metavar="START:END",
+        help="land on this site: touchdown START..END ft ahead along the track (with the footprint, to say whether "
+        "the site is reachable at all)",
+    )
     parser.set_defaults(handler=run_plan)
 
 
 def run_plan(arguments: argparse.Namespace) -> int:
-    """Handler of ``helireach plan``; returns 0 if safe, 1 if not, 2 on bad input."""
+    """Handler of ``helireach plan``; returns 0 if safe (with ``--site-ft``: landed on the site), 1 if not, 2 on bad
+    input."""
     from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
     from helireach_ros.core.ocp.settings import load_settings
     from helireach_ros.core.planning.planner import plan_landing
@@ -88,11 +97,17 @@ def run_plan(arguments: argparse.Namespace) -> int:
         state = _state(arguments, airframe)
         plan = plan_landing(state, airframe, settings)
         footprint = None
-        if arguments.footprint:
+        if arguments.footprint or arguments.site_ft is not None:
             from helireach_ros.core.planning.footprint import reachable_footprint
 
             warm = (plan.warm_start,) if plan.solver.success else ()
             footprint = reachable_footprint(state.as_array(), airframe, settings, warm_starts=warm)
+        if arguments.site_ft is not None:
+            from helireach_ros.core.planning.planner import get_planner
+
+            window = (arguments.site_ft[0] * FT, arguments.site_ft[1] * FT)
+            if footprint is not None and footprint.covers(*window):  # else no landing on it: nothing to solve
+                plan = get_planner(airframe, settings.replace(objective="site")).plan(state, touchdown_window=window)
     except (ConfigError, ValueError) as error:
         print(f"helireach plan: error: {error}", file=sys.stderr)
         return 2
@@ -105,6 +120,8 @@ def run_plan(arguments: argparse.Namespace) -> int:
         summary = plan.to_dict()
         summary["airframe"] = airframe.name
         summary["airframe_digest"] = airframe.digest()
+        if arguments.site_ft is not None and footprint is not None:
+            summary["site"] = _site_summary(footprint, plan, arguments.site_ft)
         if footprint is not None:
             summary["footprint"] = {
                 "reachable": footprint.reachable, "nearest_m": _finite(footprint.nearest_m),
@@ -126,9 +143,53 @@ def run_plan(arguments: argparse.Namespace) -> int:
         )
         if footprint is not None:
             print(f"  {_footprint_line(footprint)}")
+        if arguments.site_ft is not None and footprint is not None:
+            print(f"  {_site_line(_site_summary(footprint, plan, arguments.site_ft))}")
         if arguments.plot:
             print(f"  figure: {arguments.plot}")
+    if arguments.site_ft is not None and footprint is not None:  # with a site, safe means landed on it
+        return 0 if _site_summary(footprint, plan, arguments.site_ft)["landed"] else 1
     return 0 if plan.safe else 1
+
+
+def _site(text: str) -> tuple[float, float]:
+    """``START:END`` in ft, finite, START <= END (argparse type)."""
+    try:
+        start, end = (float(part) for part in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected START:END in ft, got {text!r}") from None
+    if not (math.isfinite(start) and math.isfinite(end) and start <= end):
+        raise argparse.ArgumentTypeError(f"a site is START:END with START <= END, finite; got {text!r}")
+    return start, end
+
+
+def _site_summary(footprint, plan, site_ft: tuple[float, float]) -> dict:
+    """Whether the site is landed on (a replay-verified plan made for it), reachable at all (it overlaps the
+    footprint), and, when it is not, the nearest distance a verified landing reaches (ft)."""
+    from helireach_ros.core.planning.footprint import touchdown_distance
+    from helireach_ros.core.units import FT
+
+    start, end = site_ft
+    reachable = footprint.covers(start * FT, end * FT)
+    landed = reachable and plan.touchdown_window is not None and plan.safe
+    nearest = None
+    if footprint.reachable and not reachable:
+        nearest = footprint.farthest_m / FT if start > footprint.farthest_m / FT else footprint.nearest_m / FT
+    return {
+        "start_ft": start, "end_ft": end, "landed": landed, "reachable": reachable,
+        "touchdown_ft": _finite(touchdown_distance(plan) / FT) if landed else None, "nearest_reachable_ft": nearest,
+    }  # fmt: skip
+
+
+def _site_line(site: dict) -> str:
+    where = f"site {site['start_ft']:.0f}-{site['end_ft']:.0f} ft"
+    if site["landed"]:
+        return f"{where}: LANDED ON, touchdown {site['touchdown_ft']:.0f} ft ahead (replay-verified)"
+    if not site["reachable"]:
+        nearest = site["nearest_reachable_ft"]
+        beyond = f"; nearest reachable touchdown {nearest:.0f} ft" if nearest is not None else ""
+        return f"{where}: NOT REACHABLE (outside the footprint{beyond})"
+    return f"{where}: inside the footprint, but no replay-verified landing on it"
 
 
 def _finite(value: float) -> float | None:

@@ -15,7 +15,7 @@ from helireach_ros.core.resources import config_path
 __all__ = ["FOOTPRINT_OBJECTIVES", "METHODS", "OBJECTIVES", "PlannerSettings", "load_settings"]
 
 METHODS = ("flyable", "verified", "paper")
-OBJECTIVES = ("terminal", "reach_avoid", "nearest_touchdown", "farthest_touchdown")
+OBJECTIVES = ("terminal", "reach_avoid", "nearest_touchdown", "farthest_touchdown", "site")
 """What the flyable NLP minimises (:attr:`PlannerSettings.objective`)."""
 FOOTPRINT_OBJECTIVES = ("nearest_touchdown", "farthest_touchdown")
 """The objectives of the reachable footprint's two ends (:mod:`~helireach_ros.core.planning.footprint`)."""
@@ -66,11 +66,16 @@ class PlannerSettings:
             so a plan keeps its worst margin as large as it can instead of riding the limits. The limits stay hard
             constraints either way, so the same states are safe (value ≤ 0). ``"nearest_touchdown"`` and
             ``"farthest_touchdown"``: the touchdown distance z(T) minimised or maximised subject to a safe touchdown
-            (J ≤ −``footprint_margin`` a constraint): the ends of the reachable footprint. Other methods: always
-            ``"terminal"``.
+            (J ≤ −``footprint_margin`` a constraint): the ends of the reachable footprint. ``"site"``: the touchdown
+            cost with the touchdown distance held inside a landing site given per solve
+            (:meth:`~helireach_ros.core.planning.planner.LandingPlanner.plan`'s ``touchdown_window``). Other methods:
+            always ``"terminal"``.
         footprint_margin: how far inside the touchdown limits a footprint end lands (J ≤ −margin; 0.05 = 5 % of
             the nearest touchdown limit, the live status's caution threshold, so that an end is never a landing the
             status would call marginal; assumed). The end at J = 0 exactly would ride the limit.
+        site_backoff_m: how far inside a landing site's ends the NLP holds its touchdown, m (the replay judges the
+            site's true ends: 3 m covers the replayed touchdown's drift from the NLP's, 0.6 m at 500 ft / 75 kt;
+            assumed).
         closed_form_states: verified and flyable: the distance z and the engine power P are not decision
             variables but their collocation solutions in closed form (z the quadrature of v, P the solution
             of Ṗ = −P/τ), which satisfy their collocation equations exactly; neither feeds back into the
@@ -100,6 +105,7 @@ class PlannerSettings:
     closed_form_states: bool = True
     objective: str = "terminal"
     footprint_margin: float = 0.05
+    site_backoff_m: float = 3.0
 
     def __post_init__(self) -> None:
         problems = []
@@ -107,7 +113,7 @@ class PlannerSettings:
             problems.append(f"method must be one of {METHODS}, got {self.method!r}")
         if self.objective not in OBJECTIVES:
             problems.append(f"objective must be one of {OBJECTIVES}, got {self.objective!r}")
-        elif self.objective in FOOTPRINT_OBJECTIVES and self.method != "flyable":
+        elif (self.objective in FOOTPRINT_OBJECTIVES or self.objective == "site") and self.method != "flyable":
             problems.append(f"objective {self.objective!r} needs the flyable method, got {self.method!r}")
         integer_ranges: tuple[tuple[str, int, int], ...] = (
             ("intervals", 1, 1000),
@@ -134,6 +140,7 @@ class PlannerSettings:
             ("rotor_speed_replay_margin", 0.0, 0.1),
             ("reaction_delay_s", 0.0, 10.0),
             ("footprint_margin", 0.0, 0.5),
+            ("site_backoff_m", 0.0, 100.0),
         )
         for name, real_low, real_high in real_ranges:
             value = getattr(self, name)

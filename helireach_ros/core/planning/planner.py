@@ -41,7 +41,13 @@ from helireach_ros.core.evidence.replay import (
 )
 from helireach_ros.core.ocp.compiled_nlp import CodegenSettings
 from helireach_ros.core.ocp.settings import PlannerSettings
-from helireach_ros.core.ocp.transcription.base import SUCCESS_STATUSES, DecodedPlan, Transcription, terminal_cost
+from helireach_ros.core.ocp.transcription.base import (
+    DISTANCE_SCALE,
+    SUCCESS_STATUSES,
+    DecodedPlan,
+    Transcription,
+    terminal_cost,
+)
 from helireach_ros.core.ocp.transcription.flyable import FlyableTranscription
 from helireach_ros.core.ocp.transcription.paper import PaperTranscription
 from helireach_ros.core.ocp.transcription.verified import VerifiedTranscription
@@ -141,6 +147,8 @@ class LandingPlan:
             over (part of ``times``, the control function and the replay).
         disturbance: the disturbance accelerations (d_y, d_v, d_Ω) the plan and its replay were made with
             (:func:`~helireach_ros.core.aircraft.model.disturbed_dynamics_function`; zero: the model as it is).
+        touchdown_window: the landing site (start, end; m of touchdown distance from the initial state) the plan
+            was made for (the ``site`` objective): safe only if the replayed touchdown lies inside it. None: anywhere.
     """
 
     method: str
@@ -162,6 +170,7 @@ class LandingPlan:
     initial_control: np.ndarray = field(default_factory=lambda: np.full(2, np.nan))
     reaction_delay_s: float = 0.0
     disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    touchdown_window: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         # a plan decoded from a worker's bytes carries its status as a plain string: the same status, typed
@@ -289,6 +298,7 @@ class LandingPlanner:
         disturbance: np.ndarray | None = None,
         *,
         replay_not_safe: bool = True,
+        touchdown_window: tuple[float, float] | None = None,
     ) -> LandingPlan:
         """Solves, replays and classifies a landing from ``state``.
 
@@ -311,6 +321,10 @@ class LandingPlanner:
                 replay cannot make it safe; its :attr:`LandingPlan.replay` is
                 :func:`~helireach_ros.core.evidence.replay.not_replayed`). For callers that need only the status,
                 such as the envelope; every plan that may be called safe is replayed either way.
+            touchdown_window: the landing site, (start, end) m of touchdown distance from ``state`` along the track,
+                for the ``site`` objective (required there, refused elsewhere). The NLP holds its touchdown
+                ``settings.site_backoff_m`` inside the site (its middle, for a shorter site); the plan is safe only
+                if the replayed touchdown lies inside the site's true ends, as strictly as the touchdown limits.
 
         Raises:
             ValueError: for a non-finite or non-physical state or control, or a warm start of another NLP.
@@ -320,6 +334,7 @@ class LandingPlanner:
         _validate_state(initial, self.airframe)
         control = self._initial_control(initial, initial_control)
         disturbance = _checked_disturbance(disturbance)
+        window = self._checked_window(touchdown_window)
         transcription = self.transcription
         stored_controls = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
         # a stored control function is rebuilt into a solver warm start below, once the delay has not decided the
@@ -342,7 +357,10 @@ class LandingPlanner:
         if outcome:
             decoded, solver_stats, warm = self._without_nlp(initial, start, control, delay, outcome, solver_warm_start)
         else:
-            decoded, solver_stats, warm = self._solve(np.concatenate([start, control, disturbance]), solver_warm_start)
+            parameter = np.concatenate([start, control, disturbance])
+            # the site's row counts from the NLP's start: after a delay, the distance flown in it is taken off
+            flown = float(start[StateIndex.DISTANCE] - initial[StateIndex.DISTANCE])
+            decoded, solver_stats, warm = self._solve(parameter, solver_warm_start, window, flown)
             if delay > 0.0:
                 decoded = _with_delay(decoded, initial, control, delay)
         decided_by_replay = solver_stats.status in DECIDED_WITHOUT_NLP  # its value is the replay's
@@ -357,7 +375,7 @@ class LandingPlanner:
             status = PlanStatus.FAILED
         elif value > 0.0:
             status = PlanStatus.UNSAFE
-        elif not replay.lands_within_limits:
+        elif not replay.lands_within_limits or not _inside(window, replay.touchdown_state, initial):
             status = PlanStatus.UNVERIFIED
         else:
             status = PlanStatus.SAFE
@@ -381,6 +399,7 @@ class LandingPlanner:
             initial_control=control,
             reaction_delay_s=delay,
             disturbance=disturbance,
+            touchdown_window=window,
         )
 
     def _rebuilt_warm_start(self, stored: ControlFunctionWarmStart) -> WarmStart | None:
@@ -442,14 +461,40 @@ class LandingPlanner:
             return end, ROTOR_LIMIT_DURING_DELAY
         return end, ""
 
-    def _solve(self, parameter: np.ndarray, warm_start: WarmStart | None) -> tuple[DecodedPlan, SolverStats, WarmStart]:
+    def _checked_window(self, window: tuple[float, float] | None) -> tuple[float, float] | None:
+        """A landing site for the ``site`` objective (required there, refused elsewhere), as finite floats."""
+        site_objective = self.settings.objective == "site"
+        if window is None:
+            if site_objective:
+                raise ValueError("the site objective needs a touchdown_window (start, end) in m")
+            return None
+        if not site_objective:
+            raise ValueError(f"a touchdown_window needs the site objective, not {self.settings.objective!r}")
+        start, end = (float(value) for value in window)
+        if not (math.isfinite(start) and math.isfinite(end) and start <= end):
+            raise ValueError(f"a touchdown window is (start, end) with start <= end, finite; got {window!r}")
+        return start, end
+
+    def _solve(
+        self,
+        parameter: np.ndarray,
+        warm_start: WarmStart | None,
+        window: tuple[float, float] | None = None,
+        flown_m: float = 0.0,
+    ) -> tuple[DecodedPlan, SolverStats, WarmStart]:
         transcription = self.transcription
+        lbg, ubg = transcription.lbg, transcription.ubg
+        if window is not None and transcription.site_row is not None:
+            backoff = min(self.settings.site_backoff_m, 0.5 * (window[1] - window[0]))
+            lbg, ubg = lbg.copy(), ubg.copy()
+            lbg[transcription.site_row] = (window[0] + backoff - flown_m) / DISTANCE_SCALE
+            ubg[transcription.site_row] = (window[1] - backoff - flown_m) / DISTANCE_SCALE
         arguments: dict[str, Any] = {
             "p": parameter,
             "lbx": transcription.lbx,
             "ubx": transcription.ubx,
-            "lbg": transcription.lbg,
-            "ubg": transcription.ubg,
+            "lbg": lbg,
+            "ubg": ubg,
         }
         if warm_start is None:
             solver = transcription.cold_solver
@@ -529,6 +574,14 @@ def _with_delay(plan: DecodedPlan, initial: np.ndarray, control: np.ndarray, del
         curve_times=np.concatenate([[0.0], plan.curve_times + delay]),
         curve_states=np.column_stack([initial, plan.curve_states]),
     )
+
+
+def _inside(window: tuple[float, float] | None, touchdown: np.ndarray, initial: np.ndarray) -> bool:
+    """Whether a replayed touchdown lies inside a landing site (always, without one)."""
+    if window is None:
+        return True
+    distance = float(touchdown[StateIndex.DISTANCE] - initial[StateIndex.DISTANCE])
+    return window[0] <= distance <= window[1]
 
 
 def get_planner(

@@ -35,6 +35,7 @@ from helireach_ros.core.ocp.settings import PlannerSettings
 __all__ = ["PARAMETER_SIZE", "DecodedPlan", "Transcription", "terminal_cost"]
 
 SUCCESS_STATUSES = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+DISTANCE_SCALE = 100.0  # m: the touchdown distance's unit in the footprint objectives and the site row
 PARAMETER_SIZE = 11  # (y, v, Ω, h, z, P) at the start, the controls (C_T, θ) being flown then, the disturbance d
 
 
@@ -95,6 +96,10 @@ class Transcription(ABC):
     block_banded_kkt: ClassVar[bool] = True
     """Whether the KKT systems are block-banded over collocation intervals, which the block LDL^T is made and
     measured for; a transcription whose are not gets MUMPS."""
+    site_row: int | None = None
+    """The constraint row of the touchdown distance from the start (/ ``DISTANCE_SCALE`` m), whose bounds are a
+    landing site's, given per solve (the ``site`` objective); a row over every interval, so the KKT systems are not
+    block-banded and the NLP gets MUMPS."""
 
     # What a subclass's ``_build`` defines: the NLP and the bounds of its variables and constraints.
     decision: ca.SX
@@ -156,7 +161,9 @@ class Transcription(ABC):
         )
         codegen = codegen or CodegenSettings.from_environment()
         linear_solver, self.linear_solver = linear_solver_options(
-            codegen if self.block_banded_kkt else dataclasses.replace(codegen, linear_solver="mumps")
+            codegen
+            if self.block_banded_kkt and self.site_row is None
+            else dataclasses.replace(codegen, linear_solver="mumps")
         )
         base.update(linear_solver)
         warm.update(linear_solver)

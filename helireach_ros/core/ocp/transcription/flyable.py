@@ -47,7 +47,7 @@ import numpy as np
 from helireach_ros.core.aircraft.smooth import smooth_positive
 from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.ocp.settings import FOOTPRINT_OBJECTIVES
-from helireach_ros.core.ocp.transcription.base import DecodedPlan
+from helireach_ros.core.ocp.transcription.base import DISTANCE_SCALE, DecodedPlan
 from helireach_ros.core.ocp.transcription.verified import _TIME_SCALE, VerifiedTranscription
 
 __all__ = ["COMMIT_GAIN", "COMMIT_SMOOTHING", "RATE_BACKOFF", "TOUCHDOWN_ATTITUDE_MARGIN", "FlyableTranscription"]
@@ -58,8 +58,6 @@ TOUCHDOWN_ATTITUDE_MARGIN = np.radians(0.5)  # rad the NLP keeps θ(T) inside th
 RATE_BACKOFF = 0.01  # the NLP plans at 99 % of the rate limits: IPOPT meets constraints to 1e-4, the replay to 1e-6
 _BACKOFF_RAMP_S = 1.0  # s over which the rotor back-off grows from 0 to all of it
 _ROTOR_STEP_WIDTH = 0.1  # m: width of the step from the in-flight to the touchdown rotor-speed limit
-# m: the footprint objectives' unit of distance (so that metres of touchdown distance weigh ~100 x the smoothness term)
-_DISTANCE_SCALE = 100.0
 
 
 class FlyableTranscription(VerifiedTranscription):
@@ -134,11 +132,12 @@ class FlyableTranscription(VerifiedTranscription):
 
         scaled_controls = breakpoints / ca.repmat(control_scale, 1, intervals + 1)
         smoothness = settings.smoothness_weight * self.smoothness(scaled_controls)
-        if settings.objective in FOOTPRINT_OBJECTIVES:
-            # the touchdown distance from the start, in _DISTANCE_SCALE units, with J ≤ 0 held by the slack's bound
+        # the touchdown distance from the start, in DISTANCE_SCALE units
+        touchdown_distance = physical_states[StateIndex.DISTANCE, -1] - self.initial_state[StateIndex.DISTANCE]
+        travelled = touchdown_distance / DISTANCE_SCALE
+        if settings.objective in FOOTPRINT_OBJECTIVES:  # J ≤ −margin held by the slack's bound
             sign = 1.0 if settings.objective == "nearest_touchdown" else -1.0
-            travelled = physical_states[StateIndex.DISTANCE, -1] - self.initial_state[StateIndex.DISTANCE]
-            self.objective = sign * travelled / _DISTANCE_SCALE + smoothness
+            self.objective = sign * travelled + smoothness
         else:
             self.objective = slack + smoothness
         self.constraints = ca.vertcat(
@@ -148,6 +147,7 @@ class FlyableTranscription(VerifiedTranscription):
             ca.reshape(commit, -1, 1),
             ca.reshape(rotor_margin, -1, 1),
             *[ca.reshape(margin - slack, -1, 1) for margin in margins],
+            *([travelled] if settings.objective == "site" else []),
         )
         n_equalities = residuals.numel()
         n_rates = 4 * intervals
@@ -159,6 +159,10 @@ class FlyableTranscription(VerifiedTranscription):
         self.ubg = np.concatenate(
             [np.zeros(n_equalities + 6 + n_rates), np.full(2 * self.n_states, np.inf), np.zeros(n_margins)]
         )
+        if settings.objective == "site":  # no site until a solve gives one
+            self.site_row = self.lbg.size
+            self.lbg = np.append(self.lbg, -np.inf)
+            self.ubg = np.append(self.ubg, np.inf)
 
         self.state_lower[2] = touchdown_low * omega0  # the height-dependent limit (and back-off) is the constraint
         state_low, state_high = self.scaled_state_bounds(self.n_states, self.state_rows)
