@@ -60,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_rotor_model_option(parser)
     parser.add_argument("--weight-lb", type=float, default=None, help="override the gross weight [lbf]")
     parser.add_argument("--density-altitude-ft", type=float, default=None, help="override the density altitude [ft]")
+    parser.add_argument(
+        "--headwind-kt", type=float, default=None, help="a steady headwind along the track [kt] (negative: tailwind)"
+    )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--plot", default=None, metavar="FILE.png", help="write the trajectory figure")
     parser.add_argument(
@@ -90,6 +93,7 @@ def run_plan(arguments: argparse.Namespace) -> int:
         airframe = load_airframe(arguments.airframe).with_rotor_model_choice(arguments.rotor_model).with_conditions(
             gross_weight=None if arguments.weight_lb is None else arguments.weight_lb * LBF,
             density_altitude=None if arguments.density_altitude_ft is None else arguments.density_altitude_ft * FT,
+            headwind=None if arguments.headwind_kt is None else arguments.headwind_kt * KT,
         )
         settings = load_settings(
             arguments.settings, method=arguments.method, reaction_delay_s=arguments.reaction_delay_s
@@ -137,7 +141,8 @@ def run_plan(arguments: argparse.Namespace) -> int:
             f"engine {state.engine_power / 1e3:.0f} kW -> {plan.status.upper()} ({plan.method})\n"
             f"  value {plan.value:+.3f} (<= 0 is safe), replayed value {plan.replay.value:+.3f}\n"
             f"  time to land {plan.time_to_land:.2f} s; replayed touchdown {touchdown[0] / FT:.1f} ft/s, "
-            f"{touchdown[1] / KT:.1f} kt, rotor {100 * touchdown[2] / airframe.nominal_rotor_speed:.0f} %\n"
+            f"{plan.touchdown_ground_speed / KT:.1f} kt over the ground, "
+            f"rotor {100 * touchdown[2] / airframe.nominal_rotor_speed:.0f} %\n"
             f"  IPOPT {plan.solver.status}, {plan.solver.iterations} iterations, {plan.solver.solve_time_ms:.0f} ms\n"
             f"  {_flyability_line(plan)}"
         )

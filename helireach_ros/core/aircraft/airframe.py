@@ -34,6 +34,8 @@ __all__ = [
     "parse_airframe",
 ]
 
+MAX_WIND = 30.0  # m/s (58 kt): a wind the planner is asked to plan in, at most
+
 ROTOR_MODEL_CHOICES = ("airframe", "paper", "momentum")
 """Names a user may choose a rotor model by (:meth:`Airframe.with_rotor_model_choice`)."""
 
@@ -146,6 +148,10 @@ class Airframe:
             section; the :class:`MarginScales` defaults where it is missing).
         paper_reproduction: ``(section.key, SI value)`` pairs of the YAML's optional ``paper_reproduction``
             section: the numbers the paper's reproduction (:meth:`paper_model`) uses where this file's own differ.
+        headwind: m/s, a steady wind along the track, positive against the direction of flight (a tailwind is
+            negative); a condition of the day like the density altitude (:meth:`with_conditions`). The model's
+            forward speed v is the airspeed (the rotor and the fuselage see the air); the distance flown and the
+            touchdown speed are over the ground, v − headwind. Uniform with height (no boundary layer yet).
         sources: where each number came from (not part of equality or the hash).
     """
 
@@ -167,6 +173,7 @@ class Airframe:
     rotor_model: RotorModel = PAPER_ROTOR_MODEL
     margin_scales: MarginScales = MarginScales()
     paper_reproduction: tuple[tuple[str, float], ...] = ()
+    headwind: float = 0.0
     sources: tuple[tuple[str, str], ...] = field(default=(), compare=False, repr=False)
 
     @property
@@ -194,9 +201,14 @@ class Airframe:
         """|dC_T/dt| limit of flyable plans, 1/s: the whole collective range in ``collective_full_travel_time``."""
         return self.max_thrust_coefficient / self.flyability.collective_full_travel_time
 
-    def with_conditions(self, gross_weight: float | None = None, density_altitude: float | None = None) -> Airframe:
-        """Returns a copy at another gross weight (N) and/or density altitude (m)."""
+    def with_conditions(
+        self, gross_weight: float | None = None, density_altitude: float | None = None, headwind: float | None = None
+    ) -> Airframe:
+        """Returns a copy at another gross weight (N), density altitude (m) and/or headwind (m/s)."""
         changes: dict[str, Any] = {}
+        if headwind is not None:
+            _check_range("headwind", headwind, -MAX_WIND, MAX_WIND, "m/s")
+            changes["headwind"] = float(headwind)
         if gross_weight is not None:
             _check_range("gross_weight", gross_weight, 1.0, 1e7, "N")
             changes["gross_weight"] = float(gross_weight)
@@ -258,6 +270,8 @@ class Airframe:
             data.pop("rotor_model")
         if self.margin_scales == MarginScales():  # as before the section existed: the same digest
             data.pop("margin_scales")
+        if self.headwind == 0.0:  # calm, as before wind existed: the same digest
+            data.pop("headwind")
         data["air_density"] = self.air_density
         data["mass"] = self.mass
         return data

@@ -215,7 +215,7 @@ def _state_derivative(airframe: Airframe, state, control, momentum_roots=None):
         thrust_per_mass * ca.sin(pitch) - drag_per_speed * airframe.horizontal_drag_area * v,
         (power - rotor_power) / (airframe.rotor_inertia * guarded_rotor_speed),
         -y,
-        v,
+        v - airframe.headwind if airframe.headwind else v,  # over the ground (calm: the expression as before)
         -power / airframe.engine_time_constant,
     )
 

@@ -40,7 +40,7 @@ def plan_verdict(plan: Any, rotor_source: str) -> tuple[str, str]:
     touchdown = plan.replay.touchdown_state
     summary = (
         f"land in {plan.time_to_land:.1f} s at {touchdown[StateIndex.DESCENT_RATE] / FT:.1f} ft/s, "
-        f"{touchdown[StateIndex.FORWARD_SPEED] / KT:.1f} kt "
+        f"{plan.touchdown_ground_speed / KT:.1f} kt "
         f"(value {plan.value:+.2f})"
     )
     if plan.safe and rotor_source == "measured":

@@ -149,6 +149,7 @@ class LandingPlan:
             (:func:`~helireach_ros.core.aircraft.model.disturbed_dynamics_function`; zero: the model as it is).
         touchdown_window: the landing site (start, end; m of touchdown distance from the initial state) the plan
             was made for (the ``site`` objective): safe only if the replayed touchdown lies inside it. None: anywhere.
+        headwind: m/s, the airframe's (the forward speeds are airspeeds; the touchdown is judged over the ground).
     """
 
     method: str
@@ -171,6 +172,7 @@ class LandingPlan:
     reaction_delay_s: float = 0.0
     disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
     touchdown_window: tuple[float, float] | None = None
+    headwind: float = 0.0
 
     def __post_init__(self) -> None:
         # a plan decoded from a worker's bytes carries its status as a plain string: the same status, typed
@@ -195,6 +197,11 @@ class LandingPlan:
         """The planned controls at the node times (2 × len(times))."""
         return self.controls_at(self.times)
 
+    @property
+    def touchdown_ground_speed(self) -> float:
+        """The replayed touchdown's forward speed over the ground, m/s (the airspeed less the headwind)."""
+        return float(self.replay.touchdown_state[StateIndex.FORWARD_SPEED] - self.headwind)
+
     def to_dict(self) -> dict[str, Any]:
         """A JSON-ready summary: the fields of ``helireach plan --json``."""
         touchdown = self.replay.touchdown_state
@@ -212,6 +219,7 @@ class LandingPlan:
                 "time_s": self.replay.touchdown_time,
                 "descent_rate_ft_s": float(touchdown[0] / FT),
                 "forward_speed_kt": float(touchdown[1] / KT),
+                "ground_speed_kt": self.touchdown_ground_speed / KT,
                 "rotor_speed_pct": float(100.0 * touchdown[2] / self.nominal_rotor_speed),
                 "height_ft": float(touchdown[3] / FT),
             },
@@ -400,6 +408,7 @@ class LandingPlanner:
             reaction_delay_s=delay,
             disturbance=disturbance,
             touchdown_window=window,
+            headwind=self.airframe.headwind,
         )
 
     def _rebuilt_warm_start(self, stored: ControlFunctionWarmStart) -> WarmStart | None:

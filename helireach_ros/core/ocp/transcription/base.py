@@ -48,7 +48,7 @@ def terminal_cost(airframe: Airframe, state) -> np.ndarray:
         np.maximum.reduce(
             [
                 np.abs(state[StateIndex.DESCENT_RATE]) / limits.max_descent_rate,
-                np.abs(state[StateIndex.FORWARD_SPEED]) / limits.max_forward_speed,
+                np.abs(state[StateIndex.FORWARD_SPEED] - airframe.headwind) / limits.max_forward_speed,
                 np.abs(state[StateIndex.HEIGHT]) / limits.height_tolerance,
             ]
         )
@@ -196,9 +196,11 @@ class Transcription(ABC):
     def epigraph(self, slack, terminal_state_scaled):
         """Constraints ``±term − 1 − slack ≤ 0`` for the three normalised terminal terms."""
         limits = self.airframe.limits
+        speed = terminal_state_scaled[1] * self.state_scale[1]
+        ground_speed = speed - self.airframe.headwind if self.airframe.headwind else speed  # calm: as before
         terms = [
             terminal_state_scaled[0] * self.state_scale[0] / limits.max_descent_rate,
-            terminal_state_scaled[1] * self.state_scale[1] / limits.max_forward_speed,
+            ground_speed / limits.max_forward_speed,
             terminal_state_scaled[3] * self.state_scale[3] / limits.height_tolerance,
         ]
         return ca.vertcat(*[sign * term - 1.0 - slack for term in terms for sign in (1.0, -1.0)])

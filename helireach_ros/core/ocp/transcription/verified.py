@@ -127,7 +127,9 @@ class VerifiedTranscription(Transcription):
         physical = decided * ca.repmat(ca.DM(scale), 1, self.n_states) if symbolic else np.asarray(decided) * scale
         if len(rows) == 6:
             return physical
-        distance, power = self.closed_form(landing_time, initial, physical[1, :])
+        headwind = self.airframe.headwind
+        ground_speeds = physical[1, :] - headwind if headwind else physical[1, :]  # calm: the expression as before
+        distance, power = self.closed_form(landing_time, initial, ground_speeds)
         if symbolic:
             return ca.vertcat(physical, distance, power)
         return np.vstack([physical, np.asarray(distance), np.asarray(power)])
