@@ -495,8 +495,10 @@ class SimulatedVehicle:
                 self._autorotate_until(end)
 
     def _cruise_until(self, end: float) -> None:
-        # Level trim is an equilibrium of the true airframe with the engine holding power: only z moves.
-        self.state[StateIndex.DISTANCE] += self.state[StateIndex.FORWARD_SPEED] * (end - self.time)
+        # Level trim is an equilibrium of the true airframe with the engine holding power: only z moves (over the
+        # ground: the airspeed less the headwind)
+        ground_speed = self.state[StateIndex.FORWARD_SPEED] - self.airframe.headwind
+        self.state[StateIndex.DISTANCE] += ground_speed * (end - self.time)
         self.time = end
         if self.time >= self.scenario.failure_time:
             self.phase = "autorotation"

@@ -58,6 +58,9 @@ class ClosedLoopSettings:
             rate (docs/method/planning.md).
         disturbance: how that estimate is made (with ``estimate_disturbance``, plans start from its filtered
             state, the measurement itself at its default state gain of 1).
+        site: a landing site, (start, end) m along the track in the vehicle's distance coordinate (None: land
+            anywhere). Every plan is made for it (a planner with the ``site`` objective), each re-plan for what is
+            left of the way there from the measured distance.
     """
 
     replan_period: float = 0.25
@@ -69,6 +72,7 @@ class ClosedLoopSettings:
     estimate_disturbance: bool = True
     compensate_latency: bool = False
     disturbance: DisturbanceSettings = field(default_factory=DisturbanceSettings)
+    site: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.replan_period) and self.replan_period > 0.0):
@@ -88,6 +92,8 @@ class ClosedLoopResult:
         unsafe_plans: converged plans not called safe (value > 0 or the replay failed).
         planned_gross_weight: N, the weight the plans were made for (the estimate with ``estimate_weight``).
         final_disturbance: the disturbance estimate of the last re-plan (zero without ``estimate_disturbance``).
+        touchdown_distance: m along the track where the vehicle met the ground (its distance coordinate).
+        on_site: the touchdown lies on the policy's site (None without one).
     """
 
     touchdown: TouchdownReport
@@ -96,6 +102,8 @@ class ClosedLoopResult:
     unsafe_plans: int
     planned_gross_weight: float = math.nan
     final_disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    touchdown_distance: float = math.nan
+    on_site: bool | None = None
 
 
 def measured_state(measurement: Measurement, vehicle: SimulatedVehicle, rotor_noise_tolerance: float) -> np.ndarray:
@@ -175,13 +183,15 @@ def fly_closed_loop(
             if replanning_ends(state[StateIndex.HEIGHT], remaining, settings.min_height, settings.min_remaining):
                 replanning = False
             else:
+                here = state[StateIndex.DISTANCE]
+                window = None if settings.site is None else (settings.site[0] - here, settings.site[1] - here)
                 if current is None:  # the failure plan: from the trim flown before, after the reaction delay
-                    plan = planner.plan(state)
+                    plan = planner.plan(state, touchdown_window=window)
                 else:  # a re-plan: from the control being flown when it starts (continuous), no reaction delay
                     flying = current[1].controls_at([starts - current[0]])[:, 0]
                     plan = planner.plan(
                         state, current[1].warm_start, initial_control=flying, reaction_delay_s=0.0,
-                        disturbance=disturbance,
+                        disturbance=disturbance, touchdown_window=window,
                     )  # fmt: skip
                 if plan.solver.success:
                     plans += 1
@@ -198,4 +208,8 @@ def fly_closed_loop(
         if not vehicle.landed:
             vehicle.advance(max(next_tick - vehicle.time, 0.0))
     assert vehicle.touchdown is not None
-    return ClosedLoopResult(vehicle.touchdown, plans, failed, unsafe, planner.airframe.gross_weight, disturbance)
+    where = float(vehicle.state[StateIndex.DISTANCE])
+    on_site = None if settings.site is None else settings.site[0] <= where <= settings.site[1]
+    return ClosedLoopResult(
+        vehicle.touchdown, plans, failed, unsafe, planner.airframe.gross_weight, disturbance, where, on_site
+    )
