@@ -59,15 +59,6 @@ def test_the_footprint_objectives_need_the_flyable_method() -> None:
         load_settings(footprint_margin=-0.1)
 
 
-def test_plan_footprint_prints_both_ends_in_json() -> None:
-    command = [sys.executable, "-m", "helireach_ros.cli.main", "plan", "--height-ft", "500", "--speed-kt", "75"]
-    result = subprocess.run([*command, "--footprint", "--json"], capture_output=True, text=True, timeout=300)
-    assert result.returncode == 0, result.stderr
-    footprint = json.loads(result.stdout)["footprint"]
-    assert footprint["reachable"] is True and footprint["plans_tried"] == 4
-    assert 0.0 < footprint["nearest_m"] < footprint["farthest_m"]
-
-
 def test_a_site_inside_the_footprint_is_landed_on_and_the_replay_judges_the_sites_ends(airframe) -> None:
     settings = load_settings(objective="site")
     state = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
@@ -90,12 +81,15 @@ def test_a_site_is_given_with_the_site_objective_only_and_as_an_ordered_finite_p
 
 
 def test_plan_site_outside_the_footprint_is_not_reachable_and_names_the_nearest_reachable_touchdown() -> None:
+    """``helireach plan --site-ft`` as users run it: the footprint's ends in the JSON, the site answered apart."""
     command = [sys.executable, "-m", "helireach_ros.cli.main", "plan", "--height-ft", "500", "--speed-kt", "75"]
     result = subprocess.run([*command, "--site-ft", "4000:4200", "--json"], capture_output=True, text=True, timeout=300)
     assert result.returncode == 1, result.stderr
     summary = json.loads(result.stdout)
     site, footprint = summary["site"], summary["footprint"]
     assert site["reachable"] is False and site["landed"] is False and site["touchdown_ft"] is None
+    assert footprint["reachable"] is True and footprint["plans_tried"] == 4
+    assert 0.0 < footprint["nearest_m"] < footprint["farthest_m"]
     assert site["nearest_reachable_ft"] == pytest.approx(footprint["farthest_m"] / FT)
     assert summary["safe"] is True  # the state itself can land: off the site, which the site answer says apart
 
