@@ -14,11 +14,12 @@ import pytest
 from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
 from helireach_ros.core.aircraft.model import initial_state_after_failure
 from helireach_ros.core.aircraft.state_index import StateIndex
+from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
 from helireach_ros.core.evidence.plan_verdict import PlanStatus
 from helireach_ros.core.flight.simulation import SensorNoise, SimulatedVehicle, load_scenario
 from helireach_ros.core.ocp.settings import load_settings
 from helireach_ros.core.planning.footprint import reachable_footprint, touchdown_distance
-from helireach_ros.core.planning.planner import get_planner, plan_landing
+from helireach_ros.core.planning.planner import LandingPlan, get_planner, plan_landing
 from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.units import FT, KT
 
@@ -67,6 +68,8 @@ def test_a_site_inside_the_footprint_is_landed_on_and_the_replay_judges_the_site
     assert plan.status is PlanStatus.SAFE and plan.touchdown_window == window
     assert window[0] <= touchdown_distance(plan) <= window[1]
     assert plan.replay.lands_within_limits
+    crossed = decode_dataclass(LandingPlan, encode_dataclass(plan))  # as a solver worker would send it
+    assert crossed.touchdown_window == window and crossed.status is PlanStatus.SAFE
 
 
 def test_a_site_is_given_with_the_site_objective_only_and_as_an_ordered_finite_pair(airframe) -> None:

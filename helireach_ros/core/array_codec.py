@@ -8,11 +8,10 @@ asks for. (An ``.npz`` archive read with ``allow_pickle=False`` would be as safe
 ~3 ms per plan; this costs ~0.1 ms.)
 
 A dataclass is flattened field by field into named arrays (``"replay.touchdown_state"``). Supported field
-values: numpy arrays, ``float``/``int``/``bool``/``str``, ``tuple[str, ...]`` (a text array), nested dataclasses,
-``dict[str, float]``
-(stored as ``<name>.__keys__``/``<name>.__values__``) and ``None`` (stored as the marker
-``<name>.__none__``). Decoding follows the reader's type hints, so bytes written for another class (a
-missing field) raise :class:`ValueError`.
+values: numpy arrays, ``float``/``int``/``bool``/``str``, ``tuple[str, ...]`` (a text array), ``tuple[float, ...]``,
+nested dataclasses, ``dict[str, float]`` (stored as ``<name>.__keys__``/``<name>.__values__``) and ``None``
+(stored as the marker ``<name>.__none__``). Decoding follows the reader's type hints, so bytes written for another
+class (a missing field) raise :class:`ValueError`.
 """
 
 from __future__ import annotations
@@ -48,6 +47,8 @@ def _flatten(value: Any, prefix: str, arrays: dict[str, np.ndarray]) -> None:
         arrays[prefix] = np.asarray(value)
     elif isinstance(value, tuple) and all(isinstance(item, str) for item in value):
         arrays[prefix] = np.array(value, dtype=str).reshape(-1)
+    elif isinstance(value, tuple) and all(isinstance(item, int | float | np.number) for item in value):
+        arrays[prefix] = np.array(value, dtype=float).reshape(-1)
     else:
         raise TypeError(f"{prefix}: cannot encode a {type(value).__name__}")
 
@@ -124,9 +125,11 @@ def _build(hint: Any, prefix: str, arrays: Any) -> Any:
     if origin is np.ndarray:
         return np.array(array)
     if origin is tuple:
-        if array.ndim != 1 or array.dtype.kind != "U":
-            raise ValueError(f"{prefix}: expected a tuple of text, got {array.dtype} {array.shape}")
-        return tuple(str(item) for item in array)
+        if array.ndim == 1 and array.dtype.kind == "U":
+            return tuple(str(item) for item in array)
+        if array.ndim == 1 and array.dtype.kind == "f":  # a tuple of numbers (e.g. a landing site's ends)
+            return tuple(float(item) for item in array)
+        raise ValueError(f"{prefix}: expected a tuple of text or numbers, got {array.dtype} {array.shape}")
     if origin in (bool, int, float, str):
         if array.shape != ():
             raise ValueError(f"{prefix}: expected a scalar, got shape {array.shape}")
