@@ -18,7 +18,12 @@ from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
 from helireach_ros.core.evidence.plan_verdict import PlanStatus
 from helireach_ros.core.flight.simulation import SensorNoise, SimulatedVehicle, load_scenario
 from helireach_ros.core.ocp.settings import load_settings
-from helireach_ros.core.planning.footprint import reachable_footprint, touchdown_distance
+from helireach_ros.core.planning.footprint import (
+    ReachableFootprint,
+    SiteReachability,
+    reachable_footprint,
+    touchdown_distance,
+)
 from helireach_ros.core.planning.planner import LandingPlan, get_planner, plan_landing
 from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop
 from helireach_ros.core.units import FT, KT
@@ -42,6 +47,13 @@ def test_from_500_ft_and_75_kt_both_ends_land_inside_the_limits_around_the_touch
     assert footprint.farthest_m - footprint.nearest_m > 100 * FT  # a choice of where to land, not a point
     assert footprint.covers(footprint.nearest_m - 10.0, footprint.nearest_m + 10.0)
     assert not footprint.covers(footprint.farthest_m + 1.0, footprint.farthest_m + 100.0)
+    near, far = footprint.nearest_m, footprint.farthest_m
+    assert footprint.site_reachability(near + 10.0, near + 20.0) is SiteReachability.REACHABLE
+    assert footprint.site_reachability(far + 1.0, far + 50.0) is SiteReachability.NOT_REACHABLE
+    # with only the far end verified, a site short of it is unknown (a site plan may still land), not unreachable
+    far_only = ReachableFootprint(None, footprint.farthest, footprint.tried)
+    assert far_only.site_reachability(near - 50.0, near - 10.0) is SiteReachability.UNKNOWN
+    assert far_only.site_reachability(far + 1.0, far + 50.0) is SiteReachability.NOT_REACHABLE
     assert len(footprint.tried) == 4  # each end warm from the plan, and cold
 
 
@@ -90,7 +102,7 @@ def test_plan_site_outside_the_footprint_is_not_reachable_and_names_the_nearest_
     assert result.returncode == 1, result.stderr
     summary = json.loads(result.stdout)
     site, footprint = summary["site"], summary["footprint"]
-    assert site["reachable"] is False and site["landed"] is False and site["touchdown_ft"] is None
+    assert site["reachable"] == "not_reachable" and site["landed"] is False and site["touchdown_ft"] is None
     assert footprint["reachable"] is True and footprint["plans_tried"] == 4
     assert 0.0 < footprint["nearest_m"] < footprint["farthest_m"]
     assert site["nearest_reachable_ft"] == pytest.approx(footprint["farthest_m"] / FT)

@@ -110,7 +110,8 @@ def run_plan(arguments: argparse.Namespace) -> int:
             from helireach_ros.core.planning.planner import get_planner
 
             window = (arguments.site_ft[0] * FT, arguments.site_ft[1] * FT)
-            if footprint is not None and footprint.covers(*window):  # else no landing on it: nothing to solve
+            # beyond a verified end of the footprint no landing reaches the site: nothing to solve
+            if footprint is not None and footprint.site_reachability(*window) != "not_reachable":
                 plan = get_planner(airframe, settings.replace(objective="site")).plan(state, touchdown_window=window)
     except (ConfigError, ValueError) as error:
         print(f"helireach plan: error: {error}", file=sys.stderr)
@@ -175,13 +176,13 @@ def _site_summary(footprint, plan, site_ft: tuple[float, float]) -> dict:
     from helireach_ros.core.units import FT
 
     start, end = site_ft
-    reachable = footprint.covers(start * FT, end * FT)
-    landed = reachable and plan.touchdown_window is not None and plan.safe
+    reachability = footprint.site_reachability(start * FT, end * FT)
+    landed = plan.touchdown_window is not None and plan.safe
     nearest = None
-    if footprint.reachable and not reachable:
+    if reachability == "not_reachable":
         nearest = footprint.farthest_m / FT if start > footprint.farthest_m / FT else footprint.nearest_m / FT
     return {
-        "start_ft": start, "end_ft": end, "landed": landed, "reachable": reachable,
+        "start_ft": start, "end_ft": end, "landed": landed, "reachable": str(reachability),
         "touchdown_ft": _finite(touchdown_distance(plan) / FT) if landed else None, "nearest_reachable_ft": nearest,
     }  # fmt: skip
 
@@ -190,10 +191,11 @@ def _site_line(site: dict) -> str:
     where = f"site {site['start_ft']:.0f}-{site['end_ft']:.0f} ft"
     if site["landed"]:
         return f"{where}: LANDED ON, touchdown {site['touchdown_ft']:.0f} ft ahead (replay-verified)"
-    if not site["reachable"]:
+    if site["reachable"] == "not_reachable":
         nearest = site["nearest_reachable_ft"]
-        beyond = f"; nearest reachable touchdown {nearest:.0f} ft" if nearest is not None else ""
-        return f"{where}: NOT REACHABLE (outside the footprint{beyond})"
+        return f"{where}: NOT REACHABLE (beyond the footprint; nearest reachable touchdown {nearest:.0f} ft)"
+    if site["reachable"] == "unknown":
+        return f"{where}: no replay-verified landing on it (the footprint's end on that side is not verified either)"
     return f"{where}: inside the footprint, but no replay-verified landing on it"
 
 

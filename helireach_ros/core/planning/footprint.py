@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 
 import numpy as np
 
@@ -32,7 +33,15 @@ from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.planning.planner import LandingPlan, WarmStart, get_planner
 
-__all__ = ["ReachableFootprint", "reachable_footprint", "touchdown_distance"]
+__all__ = ["ReachableFootprint", "SiteReachability", "reachable_footprint", "touchdown_distance"]
+
+
+class SiteReachability(StrEnum):
+    """What the footprint says of a landing site."""
+
+    REACHABLE = "reachable"  # it overlaps the footprint between two verified ends
+    NOT_REACHABLE = "not_reachable"  # it lies beyond a verified end
+    UNKNOWN = "unknown"  # an end the site would need is not verified
 
 
 def touchdown_distance(plan: LandingPlan) -> float:
@@ -70,8 +79,18 @@ class ReachableFootprint:
         return touchdown_distance(self.farthest) if self.farthest is not None else math.nan
 
     def covers(self, start_m: float, end_m: float) -> bool:
-        """Whether [start_m, end_m] (a site along the track, m from the state) overlaps the footprint."""
+        """Whether [start_m, end_m] (a site along the track, m from the state) overlaps the footprint (both ends
+        verified)."""
         return self.reachable and start_m <= self.farthest_m and end_m >= self.nearest_m
+
+    def site_reachability(self, start_m: float, end_m: float) -> SiteReachability:
+        """Whether a site can be reached, as far as the verified ends tell: beyond a verified end it cannot
+        (within the model); where an end is missing, the footprint does not know (a site plan may still land)."""
+        if self.farthest is not None and start_m > self.farthest_m:
+            return SiteReachability.NOT_REACHABLE
+        if self.nearest is not None and end_m < self.nearest_m:
+            return SiteReachability.NOT_REACHABLE
+        return SiteReachability.REACHABLE if self.reachable else SiteReachability.UNKNOWN
 
 
 def reachable_footprint(
