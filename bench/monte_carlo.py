@@ -3,8 +3,8 @@
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
      [--policies none weight disturbance weight+disturbance ...] [--objectives terminal reach_avoid]
-     [--replan-periods 0.25 0.1] [--state-gains 1 0.5] [--planner-models nominal truth] [--noise set none]
-     [--truth-check] [--json]
+     [--replan-periods 0.25 0.1] [--state-gains 1 0.5] [--disturbance-windows 0 8] [--planner-models nominal truth]
+     [--noise set none] [--truth-check] [--json]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.robustness.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -43,6 +43,9 @@ learnt from each re-planning interval's prediction error (:mod:`helireach_ros.co
 ``latency``: each re-plan starts from the current plan flown ahead in the model for the latency
 (:attr:`~helireach_ros.core.robustness.closed_loop.ClosedLoopSettings.compensate_latency`). ``--state-gains``: the
 disturbance estimate's state gain α (below 1 an α–β observer whose filtered state the plans start from).
+``--disturbance-windows``: W, the disturbance estimate as the mean of the last W intervals' implied disturbances
+(:attr:`~helireach_ros.core.estimation.disturbance.DisturbanceSettings.window`; 0: the filter of gain
+``--disturbance-gain``, the default); each is run with every other setting, on the same draws.
 
 Re-planning periods (``--replan-periods``): s between re-plans (the planner node's ``replan_period``); each is run
 with every objective, policy and margin setting, on the same draws.
@@ -172,6 +175,17 @@ POLICY_PARTS = {"weight": "estimate_weight", "disturbance": "estimate_disturbanc
 """``--policies`` words and the :class:`ClosedLoopSettings` switch each turns on."""
 
 
+def _window(text: str) -> int:
+    """A ``--disturbance-windows`` entry: an integer >= 0 (0: the exponential filter)."""
+    try:
+        window = int(text)
+    except ValueError:
+        window = -1
+    if window < 0:
+        raise argparse.ArgumentTypeError(f"disturbance window {text!r}: need an integer >= 0")
+    return window
+
+
 def parse_policy(text: str) -> str:
     """A ``--policies`` entry: ``none`` or ``+``-joined :data:`POLICY_PARTS` words."""
     parts = [] if text == "none" else text.split("+")
@@ -183,14 +197,14 @@ def parse_policy(text: str) -> str:
 
 def closed_loop_settings(
     policy: str, latency: float, disturbance_gain: float, replan_period: float = ClosedLoopSettings().replan_period,
-    state_gain: float = DisturbanceSettings().state_gain,
+    state_gain: float = DisturbanceSettings().state_gain, disturbance_window: int | None = DisturbanceSettings().window,
 ) -> ClosedLoopSettings:
     """The re-planning policy of a run."""
     parts = [] if policy == "none" else policy.split("+")
     switches = {switch: part in parts for part, switch in POLICY_PARTS.items()}  # each one explicit
     return ClosedLoopSettings(
         latency=latency, replan_period=replan_period,
-        disturbance=DisturbanceSettings(gain=disturbance_gain, state_gain=state_gain),
+        disturbance=DisturbanceSettings(gain=disturbance_gain, state_gain=state_gain, window=disturbance_window),
         **switches,
     )  # fmt: skip
 
@@ -213,6 +227,7 @@ class Flight:
     replan_period: float = ClosedLoopSettings().replan_period
     planner_model: str = "nominal"
     state_gain: float = DisturbanceSettings().state_gain
+    disturbance_window: int | None = DisturbanceSettings().window
 
 
 def _settings(flight: Flight) -> tuple[Airframe, PlannerSettings]:
@@ -232,8 +247,9 @@ def fly(flight: Flight) -> dict:
     vehicle = model_vehicle(scenario, flight.model, airframe, settings)  # judged against the true limits
     started = time.perf_counter()
     policy = closed_loop_settings(
-        flight.policy, flight.model.latency, flight.disturbance_gain, flight.replan_period, flight.state_gain
-    )
+        flight.policy, flight.model.latency, flight.disturbance_gain, flight.replan_period, flight.state_gain,
+        flight.disturbance_window,
+    )  # fmt: skip
     result = fly_closed_loop(vehicle, planner, policy)
     report = result.touchdown
     omega0 = airframe.nominal_rotor_speed
@@ -432,6 +448,10 @@ def main() -> None:
         help="the disturbance observer's state gain alpha (1: plan from the raw measurement)",
     )  # fmt: skip
     parser.add_argument(
+        "--disturbance-windows", "--disturbance-window", type=_window, nargs="+", default=[0],
+        help="W: the disturbance estimate as the mean of the last W intervals (0: the filter of --disturbance-gain)",
+    )  # fmt: skip
+    parser.add_argument(
         "--noise", nargs="+", choices=("set", "none"), default=["set"],
         help="the uncertainty set's sensor noise or exact measurements (each is run with every other setting)",
     )
@@ -450,7 +470,7 @@ def main() -> None:
         f"uncertainty set {uncertainty.name!r} ({', '.join(uncertainty.uncertain_quantities)}), uniform draws; "
         f"{len(seeds)} runs per margin setting over {len(states)} initial states, {arguments.workers} workers"
     )
-    print(f"disturbance filter gain {arguments.disturbance_gain:g} (policies with 'disturbance')")
+    print(f"disturbance filter gain {arguments.disturbance_gain:g} (policies with 'disturbance'; unused with a window)")
     draws, noise_seeds = {}, {}
     for seed in seeds:
         draw_sequence, noise_sequence = np.random.SeedSequence(seed).spawn(2)
@@ -459,19 +479,20 @@ def main() -> None:
     numbers: dict = {
         "uncertainty_set": uncertainty.name, "uncertain_quantities": list(uncertainty.uncertain_quantities),
         "runs": len(seeds), "initial_states": len(states), "workers": arguments.workers,
-        "disturbance_gain": arguments.disturbance_gain, "settings": [],
+        "disturbance_gain": arguments.disturbance_gain, "disturbance_windows": arguments.disturbance_windows,
+        "settings": [],
     }  # fmt: skip
     file_objective = _context(arguments.uncertainty)[1].objective
 
     def flights(
         margin: Margin, policy: str, objective: str, replan_period: float, planner_model: str = "nominal",
-        state_gain: float = DisturbanceSettings().state_gain, noise: str = "set",
+        state_gain: float = DisturbanceSettings().state_gain, noise: str = "set", window: int = 0,
     ) -> list[Flight]:
         sensor_noise = uncertainty.sensor_noise if noise == "set" else SensorNoise()
         return [
             Flight(arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
                    sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain, objective,
-                   replan_period, planner_model, state_gain)
+                   replan_period, planner_model, state_gain, window or None)
             for seed in seeds
         ]  # fmt: skip
 
@@ -485,21 +506,23 @@ def main() -> None:
         print(f"truth check of the {len(seeds)} draws: wall {time.perf_counter() - started:.0f} s")
     settings = itertools.product(
         arguments.noise, arguments.planner_models, [objective or file_objective for objective in arguments.objectives],
-        arguments.replan_periods, arguments.state_gains, arguments.policies, arguments.margins,
+        arguments.replan_periods, arguments.state_gains, arguments.disturbance_windows, arguments.policies,
+        arguments.margins,
     )  # fmt: skip
-    for noise, planner_model, objective, replan_period, state_gain, policy, margin in settings:
+    for noise, planner_model, objective, replan_period, state_gain, window, policy, margin in settings:
         started = time.perf_counter()
+        estimate = f"window {window}" if window else f"filter gain {arguments.disturbance_gain:g}"
         print(
             f"\n== planner model {planner_model}, objective {objective}, a re-plan every {replan_period:g} s, "
-            f"state gain {state_gain:g}, sensor noise {noise} =="
+            f"state gain {state_gain:g}, disturbance {estimate}, sensor noise {noise} =="
         )
-        flown = flights(margin, policy, objective, replan_period, planner_model, state_gain, noise)
+        flown = flights(margin, policy, objective, replan_period, planner_model, state_gain, noise, window)
         results = run_tasks(flown, arguments.workers)
         results = [{**truth, **result} for truth, result in zip(truths, results, strict=True)]
         setting = report(policy, margin, states, seeds, draws, results, airframe, uncertainty)
         setting.update(
             objective=objective, replan_period_s=replan_period, planner_model=planner_model, state_gain=state_gain,
-            sensor_noise=noise,
+            disturbance_window=window, sensor_noise=noise,
         )
         setting["wall_s"] = time.perf_counter() - started
         numbers["settings"].append(setting)

@@ -85,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
         ends = (
             f"{footprint.nearest_m / FT:7.0f} - {footprint.farthest_m / FT:7.0f}"
             if footprint.reachable
-            else f"nearest {footprint.nearest_m / FT:.0f}, farthest {footprint.farthest_m / FT:.0f} (NaN: none verified)"
+            else f"nearest {footprint.nearest_m / FT:.0f}, farthest {footprint.farthest_m / FT:.0f} (NaN: not verified)"
         )
         print(f"  wind {wind_kt:+5.1f} kt: {ends}  (touchdown-cost plan: {plan.status})")
     print(f"load after: {loadavg_text()}")
