@@ -356,7 +356,8 @@ class TouchdownReport:
 
     Attributes:
         time_after_failure: time of ground contact after the failure, s.
-        descent_rate: y at contact, m/s. forward_speed: v at contact, m/s. rotor_speed: Ω at contact, rad/s.
+        descent_rate: y at contact, m/s. forward_speed: at contact over the ground (the airspeed v less the
+            headwind: what the touchdown limit is about), m/s. rotor_speed: Ω at contact, rad/s.
         min_rotor_speed, max_rotor_speed: Ω range in flight (see the module docstring), rad/s.
         value: J at contact (≤ 0: within the touchdown limits; inf without a contact).
         rotor_speed_within_limits: Ω stayed within its limits (± the replay margin) until the touchdown set.
@@ -577,10 +578,11 @@ class SimulatedVehicle:
             and high <= limits.max_rotor_speed_ratio * omega0 + margin
         )
         value = float(terminal_cost(self.nominal_airframe, self.state)) if not reason else math.inf
+        ground_speed = float(self.state[StateIndex.FORWARD_SPEED] - self.nominal_airframe.headwind)
         if not reason and value > 0.0:
             reason = (
                 f"touchdown at {self.state[StateIndex.DESCENT_RATE] / FT:.1f} ft/s and "
-                f"{self.state[StateIndex.FORWARD_SPEED] / KT:.1f} kt exceeds the limits "
+                f"{ground_speed / KT:.1f} kt exceeds the limits "
                 f"({limits.max_descent_rate / FT:.1f} ft/s, {limits.max_forward_speed / KT:.1f} kt)"
             )
         if not reason and not rotor_ok:
@@ -588,7 +590,7 @@ class SimulatedVehicle:
         self.touchdown = TouchdownReport(
             time_after_failure=self.time - self.scenario.failure_time,
             descent_rate=float(self.state[StateIndex.DESCENT_RATE]),
-            forward_speed=float(self.state[StateIndex.FORWARD_SPEED]),
+            forward_speed=ground_speed,
             rotor_speed=float(self.state[StateIndex.ROTOR_SPEED]),
             min_rotor_speed=low,
             max_rotor_speed=high,
