@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import dataclasses
 import re
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -32,6 +34,7 @@ from helireach_ros.core.status_contracts import (
     StatusContract,
     TouchdownValues,
 )
+from helireach_ros.core.status_values import format_value
 from helireach_ros.core.units import FT, KT
 
 MSG_DOCS = Path(__file__).resolve().parent.parent / "msg_docs"
@@ -43,6 +46,11 @@ CONTRACTS: tuple[type[StatusContract], ...] = (
     SafetyStatusValues,
 )
 S = 1_000_000_000
+
+
+def formatted(values: Mapping[str, Any]) -> dict[str, str]:
+    """Values as a message carries them (what ``diagnostic_status`` writes, what a consumer receives)."""
+    return {name: format_value(value) for name, value in values.items()}
 
 
 def documented_keys(topic: str) -> set[str]:
@@ -77,7 +85,7 @@ def test_every_key_of_a_contract_is_documented_on_its_topics_page(contract: type
 @pytest.mark.parametrize("contract", CONTRACTS, ids=lambda contract: contract.__name__)
 def test_what_a_producer_writes_a_consumer_reads_back(contract: type[StatusContract]) -> None:
     written = example(contract)
-    assert contract.from_values(StatusContract.formatted(written.to_values())) == written
+    assert contract.from_values(formatted(written.to_values())) == written
     assert contract.from_values({}) == contract()  # nothing sent: nothing known
     assert contract().to_values() == {}
 
@@ -108,30 +116,28 @@ def test_the_planners_reports_read_back_through_the_contracts(failure: FailureEp
         fallback_plan(state, airframe, load_settings()), identity=identity, failure=failure, state=state,
         stamp_ns=11 * S, reason="deadline", lateness=None, latency_ms=250.0,
     )  # fmt: skip
-    read = PlanStatusValues.from_values(StatusContract.formatted(fallback.values))
+    read = PlanStatusValues.from_values(formatted(fallback.values))
     assert (read.status, read.safe, read.fallback, read.failure_stamp_ns, read.state_stamp_ns) == (
         "fallback", False, True, 10 * S, 11 * S,
     )  # fmt: skip
     assert read.initial_state == pytest.approx(tuple(state)) and read.late is False
     assert read.gross_weight == read.planned_gross_weight == airframe.gross_weight
-    evidence = plan_evidence(StatusContract.formatted(fallback.values), 10 * S)
+    evidence = plan_evidence(formatted(fallback.values), 10 * S)
     assert evidence is not None and evidence.status == "fallback" and not evidence.verified
-    assert plan_evidence(StatusContract.formatted(fallback.values), 9 * S) is None  # another episode's plan
+    assert plan_evidence(formatted(fallback.values), 9 * S) is None  # another episode's plan
     episode = EpisodeState(phase=EpisodePhase.LANDED, episode_id=1, started_ns=10 * S, ended_ns=30 * S)
     for report in (no_plan_report(failure, "no state"), episode_end_report(failure, EpisodePhase.LANDED, episode, 0)):
-        read = PlanStatusValues.from_values(StatusContract.formatted(report.values))
+        read = PlanStatusValues.from_values(formatted(report.values))
         assert read.safe is False and read.fallback is False and read.failure_id == 3
     pending = robust_report((3, 10 * S, 11 * S), None, "corners")
-    verdict = RobustVerdictValues.from_values(StatusContract.formatted(pending.values))
+    verdict = RobustVerdictValues.from_values(formatted(pending.values))
     assert (verdict.robust, verdict.design, verdict.failure_id, verdict.state_stamp_ns) == (
         ROBUST_PENDING, "corners", 3, 11 * S,
     )  # fmt: skip
 
 
 def test_live_evidence_needs_a_status_and_a_state_stamp_and_a_readable_value() -> None:
-    values = StatusContract.formatted(
-        LiveVerdictValues(status="safe", value=-0.2, verified=True, state_stamp_ns=10 * S).to_values()
-    )
+    values = formatted(LiveVerdictValues(status="safe", value=-0.2, verified=True, state_stamp_ns=10 * S).to_values())
     evidence = live_evidence(values, now_ns=10 * S + S // 10, max_age_s=0.5)
     assert (
         evidence is not None and evidence.verified and evidence.current and evidence.state_age_s == pytest.approx(0.1)

@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
 
-from helireach_ros.core.status_values import format_value, parse_bool
+from helireach_ros.core.status_values import parse_bool
 
 __all__ = [
     "ROBUST_PENDING",
@@ -121,11 +121,6 @@ class StatusContract:
                 text = values.get(field.metadata["keys"][0])
                 read[field.name] = None if text is None else _READERS[field.metadata["kind"]](text)
         return cls(**read)
-
-    @staticmethod
-    def formatted(values: Mapping[str, Any]) -> dict[str, str]:
-        """Values as a message carries them (what a consumer receives from a producer's values)."""
-        return {name: format_value(value) for name, value in values.items()}
 
 
 @dataclass(frozen=True)

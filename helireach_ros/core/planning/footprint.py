@@ -81,7 +81,7 @@ class ReachableFootprint:
     def covers(self, start_m: float, end_m: float) -> bool:
         """Whether [start_m, end_m] (a site along the track, m from the state) overlaps the footprint (both ends
         verified)."""
-        return self.reachable and start_m <= self.farthest_m and end_m >= self.nearest_m
+        return self.site_reachability(start_m, end_m) is SiteReachability.REACHABLE
 
     def site_reachability(self, start_m: float, end_m: float) -> SiteReachability:
         """Whether a site can be reached, as far as the verified ends tell: beyond a verified end it cannot
