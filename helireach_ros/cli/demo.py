@@ -22,7 +22,14 @@ The planner verifies its failure plan robustly in the background (planner parame
 in the demo, ``--no-robust-verification`` to turn it off): the plan goes out flagged ``robust: pending`` and the
 summary gives the verdict, or says it was still pending at touchdown.
 
-Run: ``python -m helireach_ros.cli.demo --out out [--hold] [--no-display] [--scenario NAME] [--mismatch NAME]``.
+``--site-ft START:END`` adds a landing site along the track (ft of the odometry's along-track distance from where the
+run starts; the failure comes about 415 ft in): the planner's ``landing_sites`` parameter. The live evaluations before
+the failure plan to land on it, so the standby plan is the site's; the failure plan and the re-plans land on it (or
+anywhere, saying so, if it cannot be reached); the summary gives where the vehicle touched down and whether that is on
+the site, and the demo exits 0 only if the landing met the limits *on the site*.
+
+Run: ``python -m helireach_ros.cli.demo --out out [--hold] [--no-display] [--scenario NAME] [--mismatch NAME]
+[--site-ft START:END]``.
 """
 
 from __future__ import annotations
@@ -40,9 +47,10 @@ import numpy as np
 
 from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES
+from helireach_ros.core.policies.landing_sites import LandingSite
 from helireach_ros.ros.executors import DEFAULT_EXECUTOR, EXECUTOR_KINDS
 
-__all__ = ["DemoResult", "demo_ros_arguments", "main", "register", "run_demo"]
+__all__ = ["DemoResult", "demo_ros_arguments", "demo_site", "main", "register", "run_demo"]
 
 _TOUCHDOWN_TIMEOUT_S = 120.0  # wall time from start; the demo scenario lands about 16 s in
 
@@ -87,11 +95,20 @@ class DemoResult:
         self.mismatch_preset: str | None = None  # None: the scenario's own mismatch
         self.planned_weight: Any = None  # the planner's WeightChoice for the failure
         self.file_gross_weight = float("nan")
+        self.site: Any = None  # the LandingSite asked for (None: anywhere)
+        self.touchdown_distance = float("nan")  # m along the track where the vehicle met the ground
+
+    @property
+    def on_site(self) -> bool | None:
+        """The vehicle touched down on the site (None: no site asked for)."""
+        if self.site is None:
+            return None
+        return self.touchdown is not None and bool(self.site.contains(self.touchdown_distance))
 
     @property
     def landed_within_limits(self) -> bool:
-        """The vehicle touched down within the landing limits."""
-        return self.touchdown is not None and bool(self.touchdown.within_limits)
+        """The vehicle touched down within the landing limits (and on the site, if one was asked for)."""
+        return self.touchdown is not None and bool(self.touchdown.within_limits) and self.on_site is not False
 
 
 def run_demo(
@@ -107,11 +124,12 @@ def run_demo(
     mismatch: str | None = None,
     estimate_weight: bool | None = None,
     robust_verification: bool = True,
+    site: LandingSite | None = None,
 ) -> DemoResult:
     """Runs the demo (see the module docstring) and returns what it produced.
 
     ``mismatch``: a preset the vehicle flies (None: the scenario's own); ``estimate_weight``: the planner's
-    parameter (None: on with a preset, else its configured value).
+    parameter (None: on with a preset, else its configured value); ``site``: a landing site (None: anywhere).
     """
     if estimate_weight is None and mismatch is not None:
         estimate_weight = True  # the presets are there to show what the estimate buys
@@ -127,6 +145,7 @@ def run_demo(
         extra.append(create_display_with_fallback)
     result = DemoResult()
     result.mismatch_preset = mismatch
+    result.site = site
     system = build_system(
         params_files,
         with_sim=True,
@@ -134,7 +153,7 @@ def run_demo(
         scenario=scenario,
         extra_nodes=extra,
         context=context,
-        ros_args=demo_ros_arguments(mismatch, estimate_weight, robust_verification),
+        ros_args=demo_ros_arguments(mismatch, estimate_weight, robust_verification, site),
         executor=executor,
         command="python -m helireach_ros.cli.demo",
     )
@@ -183,6 +202,7 @@ def run_demo(
             result.track = np.array(
                 [[state[StateIndex.HEIGHT], state[StateIndex.FORWARD_SPEED]] for _, state in sim.vehicle.history]
             )
+            result.touchdown_distance = float(sim.vehicle.state[StateIndex.DISTANCE])
             if hold and not system.stop_requested:
                 print("helireach demo: holding the nodes after touchdown; Ctrl-C to end", flush=True)
                 system.spin_until(lambda: False, math.inf, step_s=0.1)
@@ -196,10 +216,13 @@ def run_demo(
 
 
 def demo_ros_arguments(
-    mismatch: str | None, estimate_weight: bool | None, robust_verification: bool = True
+    mismatch: str | None,
+    estimate_weight: bool | None,
+    robust_verification: bool = True,
+    site: LandingSite | None = None,
 ) -> list[str]:
-    """The ``-p`` arguments for a mismatch preset (the vehicle), the planner's ``estimate_weight`` and its
-    ``robust_verification``.
+    """The ``-p`` arguments for a mismatch preset (the vehicle), the planner's ``estimate_weight``, its
+    ``robust_verification`` and its ``landing_sites``.
 
     Raises:
         ValueError: an unknown preset.
@@ -212,7 +235,25 @@ def demo_ros_arguments(
     if estimate_weight is not None:
         arguments += ["-p", f"helireach_planner:estimate_weight:={'true' if estimate_weight else 'false'}"]
     arguments += ["-p", f"helireach_planner:robust_verification:={'true' if robust_verification else 'false'}"]
+    if site is not None:
+        arguments += ["-p", f"helireach_planner:landing_sites:={site.name}:{site.start_m:.3f}:{site.end_m:.3f}"]
     return arguments
+
+
+def demo_site(text: str) -> LandingSite:
+    """The demo's landing site from ``"START:END"`` in ft along the track.
+
+    Raises:
+        ValueError: not two numbers, or start > end.
+    """
+    from helireach_ros.core.units import FT
+
+    parts = text.split(":")
+    try:
+        start_ft, end_ft = (float(part) for part in parts)
+    except ValueError:
+        raise ValueError(f"--site-ft is START:END in ft, got {text!r}") from None
+    return LandingSite("demo_site", start_ft * FT, end_ft * FT)
 
 
 def _write_figures(out: Path, result: DemoResult, envelope: Any) -> list[Path]:
@@ -275,7 +316,10 @@ def summary(result: DemoResult) -> str:
         standby = result.standby_plan
         verified = "verified" if standby.plan.verified else "NOT verified"
         after = f"{standby.latency_ms:.0f} ms after the failure"
-        lines.append(f"  standby plan              : published {after}, {verified}")
+        aimed = ""
+        if result.site is not None:
+            aimed = ", for the site" if standby.plan.touchdown_window is not None else ", off-site (site not reachable)"
+        lines.append(f"  standby plan              : published {after}, {verified}{aimed}")
     replans = max((record.replan_index for record in result.plans), default=0)
     learnt = next(
         (record.plan.disturbance for record in reversed(result.plans) if record.replan_index and not record.fallback),
@@ -311,11 +355,24 @@ def summary(result: DemoResult) -> str:
             f"{100 * result.flyability.touchdown_min_rotor_speed_ratio:.0f} % below "
             f"{result.flyability.commit_height / FT:.0f} ft), {touchdown.time_after_failure:.1f} s after the failure"
         )
+    site = result.site
+    if site is not None:
+        where = f"{result.touchdown_distance / FT:.0f} ft along the track"
+        answer = "ON the site" if result.on_site else "OFF the site"
+        planned = [record for record in result.plans if not record.fallback]
+        for_site = sum(record.plan.touchdown_window is not None for record in planned)
+        lines.append(
+            f"  landing site              : {site.name} {site.start_m / FT:.0f}-{site.end_m / FT:.0f} ft; touched down "
+            f"{where}: {answer} ({site.margin_m(result.touchdown_distance) / FT:+.0f} ft inside its nearer end); "
+            f"{for_site} of {len(planned)} plans made for it"
+        )
     verdict = (
-        "SAFE: landed within limits"
+        "SAFE: landed within limits" + (" on the site" if site is not None else "")
         if result.landed_within_limits
         else "UNSAFE: " + (touchdown.reason if touchdown is not None else "no touchdown")
     )
+    if touchdown is not None and touchdown.within_limits and not result.landed_within_limits:
+        verdict = "NOT ON THE SITE: landed within limits, off the site"
     lines.append(f"  result                    : {verdict}")
     lines.append(f"  MCAP log                  : {result.log_path} ({result.message_count} messages)")
     for figure in result.figures:
@@ -355,6 +412,13 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="verify the failure plan robustly in a low-priority process (planner parameter robust_verification; "
         "default: on)",
     )
+    parser.add_argument(
+        "--site-ft",
+        default=None,
+        metavar="START:END",
+        help="a landing site along the track, ft from where the run starts (the failure comes ~415 ft in); the "
+        "planner lands on it (e.g. 2400:2800)",
+    )
     parser.add_argument("--hold", action="store_true", help="keep the nodes running after touchdown until Ctrl-C")
     parser.add_argument(
         "--no-display", dest="display", action="store_false", help="do not serve the cockpit display page"
@@ -374,6 +438,7 @@ def register(subparsers: Any) -> None:
 
 def _run(arguments: argparse.Namespace) -> int:
     try:
+        site = demo_site(arguments.site_ft) if arguments.site_ft else None
         result = run_demo(
             arguments.out,
             arguments.scenario,
@@ -384,6 +449,7 @@ def _run(arguments: argparse.Namespace) -> int:
             mismatch=arguments.mismatch,
             estimate_weight=arguments.estimate_weight,
             robust_verification=arguments.robust_verification,
+            site=site,
         )
     except (FileNotFoundError, ValueError) as error:  # a missing parameter file, a bad parameter or scenario
         print(f"helireach demo: {error}", file=sys.stderr)

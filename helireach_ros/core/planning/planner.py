@@ -411,6 +411,22 @@ class LandingPlanner:
             headwind=self.airframe.headwind,
         )
 
+    def carried_warm_start(
+        self, warm_start: WarmStart | ControlFunctionWarmStart | None
+    ) -> WarmStart | ControlFunctionWarmStart | None:
+        """A warm start of the same landing NLP with or without the landing site's row (the ``site`` objective
+        appends one constraint row, its touchdown distance, to the touchdown-cost NLP; the decisions are the same):
+        the site row's multiplier dropped, or a zero one appended. Anything else is returned as it is (and
+        :meth:`plan` refuses a warm start of another NLP)."""
+        if not isinstance(warm_start, WarmStart):
+            return warm_start
+        rows = self.transcription.lbg.size
+        multipliers = warm_start.constraint_multipliers
+        if warm_start.primal.shape != self.transcription.lbx.shape or abs(multipliers.size - rows) != 1:
+            return warm_start
+        carried = multipliers[:rows] if multipliers.size > rows else np.append(multipliers, 0.0)
+        return WarmStart(warm_start.primal, warm_start.bound_multipliers, carried)
+
     def _rebuilt_warm_start(self, stored: ControlFunctionWarmStart) -> WarmStart | None:
         """The stored plan's primal point from its control function, flown from its own start (after its delay
         segment); None (a cold solve) where the transcription cannot rebuild one."""

@@ -55,6 +55,7 @@ __all__ = [
     "plan_values",
     "planner_health_report",
     "robust_report",
+    "site_text",
     "weight_values",
 ]
 
@@ -181,10 +182,12 @@ def converged_plan_report(
     weight: WeightChoice,
     standby: bool,
     robust_design: str | None = None,
+    sites: dict[str, Any] | None = None,
 ) -> StatusReport:
     """The status of a converged plan (first plan, standby or re-plan): its verdict, late at best WARN.
 
-    ``lateness`` None for a re-plan; ``robust_design`` names the design its pending robust verification flies.
+    ``lateness`` None for a re-plan; ``robust_design`` names the design its pending robust verification flies;
+    ``sites`` the landing site's keys (:func:`~helireach_ros.core.policies.landing_sites.site_values`).
     """
     values = {
         **plan_values(plan),
@@ -194,10 +197,12 @@ def converged_plan_report(
         "latency_ms": latency_ms,
         "rotor_speed_source": rotor_source,
         **_episode_values(identity, failure, plan.initial_state, stamp_ns, weight),
+        **(sites or {}),
     }
     if robust_design is not None:
         values.update(PlanStatusValues(robust=ROBUST_PENDING).to_values(), robust_design=robust_design)
     level, text = plan_verdict(plan, rotor_source)
+    text += site_text(sites or {}, plan.safe)
     if standby:
         state_age_s = (failure.event_stamp_ns - stamp_ns) * 1e-9
         text = f"STANDBY (live plan from {state_age_s:.2f} s before the failure; refining): {text}"
@@ -287,9 +292,11 @@ def live_report(
     configured_weight: float,
     power_fraction: float,
     now_ns: int,
+    sites: dict[str, Any] | None = None,
 ) -> StatusReport:
     """A live verdict ("if the engine failed now"): OK only for a replay-verified safe plan; no plan or a solver
-    that did not converge is ERROR (unknown, never unsafe by default)."""
+    that did not converge is ERROR (unknown, never unsafe by default). ``sites``: the landing site's keys
+    (:func:`~helireach_ros.core.policies.landing_sites.site_values`), and the text says whether it is reachable."""
     plan = verdict.plan
     verified = plan is not None and plan.verified
     live = LiveVerdictValues(
@@ -309,6 +316,7 @@ def live_report(
     values = {
         **live.to_values(),
         **weight_values(configured_weight, weight),
+        **(sites or {}),
     }
     if plan is None:
         return StatusReport("ERROR", f"LIVE ERROR: no verdict ({verdict.reason})", values)
@@ -316,7 +324,20 @@ def live_report(
         return StatusReport("ERROR", f"if the engine failed now: UNKNOWN (solver {plan.solver.status})", values)
     _, text = plan_verdict(plan, "measured")
     level = "OK" if verdict.safe and verified else "ERROR"
-    return StatusReport(level, f"if the engine failed now: {text}", values)
+    return StatusReport(level, f"if the engine failed now: {text}{site_text(sites or {}, plan.safe)}", values)
+
+
+def site_text(sites: dict[str, Any], safe: bool) -> str:
+    """What a status text adds about its landing site ("" without one): on it, or not reachable (and, for a safe
+    plan, that it lands off-site: a state that can land is not called unsafe for want of a site)."""
+    if "landing_site" not in sites or "on_site" not in sites:
+        return ""
+    name = sites["landing_site"]
+    if sites["on_site"]:
+        return f"; on site {name} ({sites['site_margin_m']:.0f} m inside its nearer end)"
+    if safe and not sites["site_planned"]:
+        return f"; site {name} NOT reachable: landing off-site at {sites['touchdown_distance_m']:.0f} m along the track"
+    return f"; site {name} NOT reachable"
 
 
 def robust_report(key: tuple[int, int, int], summary: Any | None, design: str) -> StatusReport:

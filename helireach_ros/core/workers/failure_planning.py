@@ -12,7 +12,11 @@ what it decides to publish comes back through a :class:`PlanSink` (the node's pu
 - **a re-plan** from the current state, from the control being flown at the state's stamp (the flyable controls stay
   continuous), with no reaction delay, for the model plus what the last interval taught of its error
   (:class:`~helireach_ros.core.estimation.disturbance.DisturbanceTracker`); a failed re-plan keeps the current plan;
-- **the deadline's fallback** when no plan is out in time (:func:`~helireach_ros.core.planning.fallback.fallback_plan`).
+- **the deadline's fallback** when no plan is out in time (:func:`~helireach_ros.core.planning.fallback.fallback_plan`);
+- **the landing site**, fixed when the failure starts (the standby plan's, else the selection's): the first plan and
+  every re-plan land on it when a plan for it is verified from the state, else anywhere
+  (:func:`~helireach_ros.core.policies.landing_sites.solve_site_or_anywhere`): one re-plan that cannot verify the site
+  (a model error the disturbance estimate has not learnt yet) does not give it up for the rest of the descent.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.estimation.weight_tracking import WeightChoice, ready_choice
 from helireach_ros.core.policies.failure_episode import FailureEpisode
+from helireach_ros.core.policies.landing_sites import LandingSite, SiteSelection, site_values
 from helireach_ros.core.policies.landing_supervisor import LandingSupervisor, ReplanGate
 from helireach_ros.core.policies.plan_status import PlannerHealth, SolverPoolHealth, StatusReport, planner_health_report
 from helireach_ros.core.policies.vehicle_readings import CurrentState, LatestReadings, RotorSource
@@ -83,6 +88,7 @@ class FailurePlanner:
         clock_ns: now, ns.
         zero_power: plan with zero engine power (a total power loss) rather than the measured power.
         disturbance: the re-plans' disturbance estimate (None: off).
+        sites: the landing sites and their selection (None: land anywhere).
     """
 
     def __init__(
@@ -96,6 +102,7 @@ class FailurePlanner:
         *,
         zero_power: bool,
         disturbance: DisturbanceSettings | None,
+        sites: SiteSelection | None = None,
     ) -> None:
         self.backend = backend
         self.setup_error = setup_error
@@ -107,6 +114,8 @@ class FailurePlanner:
         self._disturbance = disturbance
         self._lock = threading.Lock()
         self._episode_weight: WeightChoice | None = None
+        self._sites = sites
+        self._episode_site: LandingSite | None = None
 
     @property
     def not_configured(self) -> str:
@@ -132,6 +141,25 @@ class FailurePlanner:
         with self._lock:
             self._episode_weight = ready_choice(latest, configured, backend.ready_weights())
 
+    def fix_site(self, standby_site: LandingSite | None) -> None:
+        """Fixes the episode's landing site at its start: the standby plan's, else the selection's (None: anywhere)."""
+        site = standby_site
+        if site is None and self._sites is not None:
+            site = self._sites.selected()
+        with self._lock:
+            self._episode_site = site
+
+    @property
+    def episode_site(self) -> LandingSite | None:
+        """The landing site of the current (or last) failure episode (None: anywhere)."""
+        with self._lock:
+            return self._episode_site
+
+    def site_values(self, plan: LandingPlan) -> dict[str, object]:
+        """A plan's landing-site keys for its status (none without a site)."""
+        reachable = self._sites.reachable_count() if self._sites is not None else None
+        return site_values(self.episode_site, plan, reachable)
+
     @property
     def episode_weight(self) -> WeightChoice:
         """The gross weight the current (or last) failure episode plans for (the file's before any failure)."""
@@ -151,12 +179,15 @@ class FailurePlanner:
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
     ) -> tuple[LandingPlan | None, str]:
-        """A failure plan or re-plan for the episode's weight (blocking): (plan, "") or (None, why not)."""
+        """A failure plan or re-plan for the episode's weight (blocking): (plan, "") or (None, why not); on the
+        episode's site if it has one and a plan for it is verified, else anywhere."""
         if self.backend is None:
             return None, self.not_configured
+        site = self.episode_site
         return self.backend.solve(
             state, warm_start, gross_weight=self.episode_weight.gross_weight, initial_control=initial_control,
             reaction_delay_s=reaction_delay_s, disturbance=disturbance,
+            touchdown_window=site.window_from(state) if site is not None else None,
         )  # fmt: skip
 
     def first_plan(self, failure: FailureEpisode, retry: bool = False) -> None:

@@ -13,7 +13,10 @@ plan). :class:`LiveScheduler` decides when one starts and where it runs, and kee
   verdict, its vehicle frame and its messages, prepared off the executor when the verdict comes, so that a failure
   only publishes them;
 - a generation number: a verdict that comes back after a failure started or after a reset is not evidence any more
-  and is dropped.
+  and is dropped;
+- with landing sites, the selected site (:class:`~helireach_ros.core.policies.landing_sites.SiteSelection`): each
+  evaluation lands on it if it can, else anywhere, and records which, so that the standby plan is the selected
+  site's whenever the site is reachable.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
+from helireach_ros.core.policies.landing_sites import LandingSite, SiteSelection, site_values
 from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
 from helireach_ros.core.policies.plan_status import StatusReport, live_report
 from helireach_ros.core.policies.vehicle_readings import CurrentState, RotorSource
@@ -51,12 +55,14 @@ class StandbyPlan:
         frame: the vehicle frame of its state.
         weight: the gross weight it was made for.
         messages: its messages as prepared when the verdict came (None: not yet; opaque here).
+        site: the landing site it was asked to land on (None: no sites; its plan's window says if it does).
     """
 
     verdict: LiveVerdict
     frame: str
     weight: WeightChoice
     messages: object | None
+    site: LandingSite | None = None
 
 
 class LiveScheduler:
@@ -71,6 +77,7 @@ class LiveScheduler:
             published after a pause).
         prepare_standby: ``prepare_standby(plan, stamp_ns, frame)`` builds a standby verdict's messages (called off
             the lock, on the thread the verdict came back on).
+        sites: the landing sites and their selection (None: land anywhere).
     """
 
     def __init__(
@@ -81,8 +88,10 @@ class LiveScheduler:
         clock_ns: Callable[[], int],
         publish_verdict: Callable[[StatusReport], None],
         prepare_standby: Callable[[LandingPlan, int, str], object],
+        sites: SiteSelection | None = None,
     ) -> None:
         self.settings = settings
+        self.sites = sites
         self.evaluator = LiveEvaluator(settings)
         self._backend = backend
         self._solver_thread = solver_thread
@@ -95,6 +104,7 @@ class LiveScheduler:
         self._standby_frame = ""
         self._standby_weight: WeightChoice | None = None
         self._standby_messages: object | None = None
+        self._standby_site: LandingSite | None = None
         self.latest_weight: WeightChoice | None = None  # the weight the latest evaluation was started for
 
     @property
@@ -132,25 +142,34 @@ class LiveScheduler:
             failure_now, warm_start = prepared
             weight = self._backend.weight_now(now_ns)  # a weight no solver holds yet is built here, before any failure
             self.latest_weight = weight
-            done = partial(self._done, self._generation, failure_now, current.stamp_ns, current.frame, now_ns, weight)
+            site = self.sites.selected() if self.sites is not None else None
+            window = site.window_from(failure_now) if site is not None else None
+            done = partial(
+                self._done, self._generation, failure_now, current.stamp_ns, current.frame, now_ns, weight, site
+            )
             if self._backend.pool is not None:
                 try:
-                    job = self._backend.submit_live(failure_now, warm_start, weight.gross_weight)
+                    job = self._backend.submit_live(failure_now, warm_start, weight.gross_weight, window)
                 except RuntimeError:  # the pool is closed: the node is being destroyed
                     return
                 self._job = job
         if self._backend.pool is not None:
             job.add_done_callback(done)  # outside the lock: a job already done calls back at once, here
             return
-        self._solver_thread.submit(self._solve_in_process, done, failure_now, warm_start, weight)
+        self._solver_thread.submit(self._solve_in_process, done, failure_now, warm_start, weight, window)
 
     def _solve_in_process(
-        self, done: Callable[[Future], None], state: np.ndarray, warm_start: AnyWarmStart, weight: WeightChoice
+        self,
+        done: Callable[[Future], None],
+        state: np.ndarray,
+        warm_start: AnyWarmStart,
+        weight: WeightChoice,
+        window: tuple[float, float] | None,
     ) -> None:
         """Without a pool: the live solve on the solver thread (the cold check, as in the workers)."""
         future: Future = Future()
         try:
-            future.set_result(self._backend.solve_live(state, warm_start, weight.gross_weight))
+            future.set_result(self._backend.solve_live(state, warm_start, weight.gross_weight, window))
         except (ValueError, RuntimeError) as error:
             future.set_exception(error)
         done(future)
@@ -163,6 +182,7 @@ class LiveScheduler:
         frame: str,
         started_ns: int,
         weight: WeightChoice,
+        site: LandingSite | None,
         future: Future,
     ) -> None:
         """Records a finished evaluation and publishes its verdict (on the pool's or the solver thread)."""
@@ -177,7 +197,10 @@ class LiveScheduler:
                 verdict = self.evaluator.record(state, stamp_ns, started_ns, self._clock_ns(), plan, error)
                 standby = self.evaluator.standby_verdict is verdict
                 if standby:
-                    self._standby_frame, self._standby_weight = frame, weight
+                    self._standby_frame, self._standby_weight, self._standby_site = frame, weight, site
+                sites = self.sites
+                if sites is not None and site is not None and plan is not None and plan.solver.success:
+                    sites.record(site, plan.touchdown_window is not None and plan.safe)
                 report = live_report(
                     verdict,
                     standby=standby,
@@ -185,6 +208,7 @@ class LiveScheduler:
                     configured_weight=self._backend.airframe.gross_weight,
                     power_fraction=self.settings.power_fraction,
                     now_ns=self._clock_ns(),
+                    sites=site_values(site, plan, sites.reachable_count() if sites is not None else None),
                 )
                 self._publish_verdict(report)
             # its messages now, off the executor and outside the lock: the failure only publishes them
@@ -202,8 +226,12 @@ class LiveScheduler:
             self._job = None
             if failure_stamp_ns is None:
                 self.evaluator.reset()
+                if self.sites is not None:
+                    self.sites.forget()
                 return None
             verdict = self.evaluator.standby(failure_stamp_ns)
             if verdict is None or self._standby_weight is None:
                 return None
-            return StandbyPlan(verdict, self._standby_frame, self._standby_weight, self._standby_messages)
+            return StandbyPlan(
+                verdict, self._standby_frame, self._standby_weight, self._standby_messages, self._standby_site
+            )

@@ -62,6 +62,8 @@ class BackendSettings:
         robust_policy: the node's re-planning policy, with which each safe failure plan is verified robustly in a
             low-priority process (None: no robust verification).
         robust_uncertainty: the uncertainty set of that verification ('' = config/uncertainty.yaml).
+        site_planning: plans may be asked to land on a site (a touchdown window): the site NLP is built at start-up
+            too (needs the ``flyable`` method).
     """
 
     envelope_file: str = ""
@@ -75,6 +77,7 @@ class BackendSettings:
     weight_error: float = 0.02
     robust_policy: ClosedLoopSettings | None = None
     robust_uncertainty: str = ""
+    site_planning: bool = False
 
 
 class PlannerBackend:
@@ -102,6 +105,8 @@ class PlannerBackend:
         from helireach_ros.core.planning.planner import get_planner
 
         started = time.perf_counter()
+        if backend.site_planning and settings.method != "flyable":
+            raise ValueError(f"landing sites need the flyable method, not {settings.method!r}")
         self.airframe = airframe
         self.settings = settings
         self.backend = backend
@@ -120,7 +125,10 @@ class PlannerBackend:
                 airframe,
                 settings,
                 SolverPoolSettings(
-                    workers=backend.solver_workers, warm_up=backend.warm_up, default_timeout_s=backend.solve_timeout_s
+                    workers=backend.solver_workers,
+                    warm_up=backend.warm_up,
+                    default_timeout_s=backend.solve_timeout_s,
+                    site_planning=backend.site_planning,
                 ),
             )
             self.planner: Any = self.pool
@@ -132,6 +140,8 @@ class PlannerBackend:
                 )
         else:
             self.planner = get_planner(airframe, settings)
+            if backend.site_planning:
+                self.in_process_planner(airframe.gross_weight, site=True)
             if backend.warm_up:
                 self.warm_up_ms = self._warm_up()
         self.startup_s = time.perf_counter() - started
@@ -219,13 +229,40 @@ class PlannerBackend:
         with self._lock:
             return set(self._built_weights)
 
-    def in_process_planner(self, gross_weight: float) -> Any:
-        """The in-process planner for a weight (built at its first use, then cached by get_planner)."""
-        if gross_weight == self.airframe.gross_weight:
+    def in_process_planner(self, gross_weight: float, *, site: bool = False) -> Any:
+        """The in-process planner for a weight, anywhere or for a site (built at its first use, then cached by
+        get_planner)."""
+        if gross_weight == self.airframe.gross_weight and not site:
             return self.planner
         from helireach_ros.core.planning.planner import get_planner
 
-        return get_planner(self.model_for(gross_weight), self.settings)
+        settings = self.settings.replace(objective="site") if site else self.settings
+        return get_planner(self.model_for(gross_weight), settings)
+
+    def _solve_in_process(
+        self,
+        state: np.ndarray,
+        warm_start: Any,
+        gross_weight: float,
+        touchdown_window: tuple[float, float] | None,
+        *,
+        cold_check: bool,
+        **request: Any,
+    ) -> Any:
+        """A solve here (no pool), as a worker makes it: the site, else anywhere; the cold check if asked."""
+        from helireach_ros.core.policies.landing_sites import solve_site_or_anywhere
+
+        def solver(planner: Any, **extra: Any) -> Callable[[np.ndarray, Any], Any]:
+            def solve(at: np.ndarray, warm: Any) -> Any:
+                return planner.plan(at, planner.carried_warm_start(warm), **request, **extra)
+
+            return partial(solve_with_cold_check, solve) if cold_check else solve
+
+        anywhere = solver(self.in_process_planner(gross_weight))
+        if touchdown_window is None:
+            return anywhere(state, warm_start)
+        on_site = solver(self.in_process_planner(gross_weight, site=True), touchdown_window=touchdown_window)
+        return solve_site_or_anywhere(on_site, anywhere, state, warm_start)
 
     def add_weight_sample(self, sample: WeightSample) -> None:
         """A steady-flight reading for the weight estimate (ignored without estimation)."""
@@ -250,21 +287,30 @@ class PlannerBackend:
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
+        touchdown_window: tuple[float, float] | None = None,
     ) -> tuple[Any | None, str]:
         """A failure plan or re-plan (blocking): (plan, "") or (None, why not).
 
         ``initial_control``/``reaction_delay_s``: None for a failure plan (trim before the failure, the node's
         reaction delay); a re-plan passes the control being flown and 0, and the disturbance estimate.
+        ``touchdown_window``: land on that site (m from the state), else anywhere (the plan's own window says which).
         """
         delay = self.reaction_delay_s if reaction_delay_s is None else reaction_delay_s
         timeout_s = self.backend.solve_timeout_s
+        request: dict[str, Any] = {
+            "initial_control": initial_control,
+            "reaction_delay_s": delay,
+            "disturbance": disturbance,
+        }
         try:
             if self.pool is None:
-                planner = self.in_process_planner(gross_weight)
-                return planner.plan(state, warm_start, initial_control, delay, disturbance=disturbance), ""
+                plan = self._solve_in_process(
+                    state, warm_start, gross_weight, touchdown_window, cold_check=False, **request
+                )
+                return plan, ""
             future = self.pool.submit(
-                state, warm_start, priority=PRIORITY_FAILURE, timeout_s=timeout_s, initial_control=initial_control,
-                reaction_delay_s=delay, gross_weight=gross_weight, disturbance=disturbance,
+                state, warm_start, priority=PRIORITY_FAILURE, timeout_s=timeout_s, gross_weight=gross_weight,
+                touchdown_window=touchdown_window, **request,
             )  # fmt: skip
             try:
                 # The pool fails the job solve_timeout after a worker took it; the extra wait covers the queue.
@@ -275,7 +321,13 @@ class PlannerBackend:
         except (ValueError, RuntimeError) as error:  # SolverWorkerError is a RuntimeError
             return None, f"{type(error).__name__}: {error}"
 
-    def submit_live(self, state: np.ndarray, warm_start: Any, gross_weight: float) -> Future:
+    def submit_live(
+        self,
+        state: np.ndarray,
+        warm_start: Any,
+        gross_weight: float,
+        touchdown_window: tuple[float, float] | None = None,
+    ) -> Future:
         """A live evaluation in the pool (cold check, live priority, 4 × solve_timeout).
 
         Raises:
@@ -286,13 +338,20 @@ class PlannerBackend:
         timeout_s = _LIVE_TIMEOUT_FACTOR * self.backend.solve_timeout_s
         return self.pool.submit(
             state, warm_start, priority=PRIORITY_LIVE, timeout_s=timeout_s, cold_check=True,
-            reaction_delay_s=self.reaction_delay_s, gross_weight=gross_weight,
+            reaction_delay_s=self.reaction_delay_s, gross_weight=gross_weight, touchdown_window=touchdown_window,
         )  # fmt: skip
 
-    def solve_live(self, state: np.ndarray, warm_start: Any, gross_weight: float) -> Any:
+    def solve_live(
+        self,
+        state: np.ndarray,
+        warm_start: Any,
+        gross_weight: float,
+        touchdown_window: tuple[float, float] | None = None,
+    ) -> Any:
         """A live evaluation in this process (the cold check, as in the workers); the weight is built if new."""
-        solve = partial(self.in_process_planner(gross_weight).plan, reaction_delay_s=self.reaction_delay_s)
-        plan = solve_with_cold_check(solve, state, warm_start)
+        plan = self._solve_in_process(
+            state, warm_start, gross_weight, touchdown_window, cold_check=True, reaction_delay_s=self.reaction_delay_s
+        )
         with self._lock:
             self._built_weights.add(gross_weight)
         return plan

@@ -42,6 +42,7 @@ import multiprocessing
 import os
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
@@ -51,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from helireach_ros.core.aircraft.airframe import Airframe
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.planning.planner import ControlFunctionWarmStart, LandingPlan, WarmStart
@@ -97,6 +99,8 @@ class SolverPoolSettings:
         build_timeout_s: longest a worker may take to build the NLP of a gross weight it does not hold yet before
             the job's own timeout starts, s (a build on plain CasADi functions takes seconds; a job's timeout is
             sized for a solve).
+        site_planning: each worker also builds (and warms up) the landing-site NLP of every weight it holds, so that
+            a job with a touchdown window builds nothing (the settings' method must be ``flyable``).
     """
 
     workers: int = 2
@@ -104,6 +108,7 @@ class SolverPoolSettings:
     warm_up: bool = True
     default_timeout_s: float = 5.0
     build_timeout_s: float = 120.0
+    site_planning: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.workers, int) or self.workers < 1:
@@ -126,6 +131,7 @@ class _SolveRequest:
     gross_weight: float = math.nan  # N; NaN = the worker's airframe's
     disturbance: np.ndarray | None = None  # (d_y, d_v, d_Ω); None = the model as it is
     stored_controls: ControlFunctionWarmStart | None = None  # a stored plan to warm-start from (not warm_start)
+    touchdown_window: np.ndarray | None = None  # (start, end) m from the state: land on this site, else anywhere
 
     @property
     def start(self) -> WarmStart | ControlFunctionWarmStart | None:
@@ -144,36 +150,44 @@ def _worker_main(
     settings: PlannerSettings,
     warm_up: bool,
     gross_weights: tuple[float, ...] = (),
+    site_planning: bool = False,
 ) -> None:
-    """A worker: builds the NLP (and one for each of ``gross_weights``, N), warms them up, then answers requests
-    until told to stop or the pipe closes."""
+    """A worker: builds the NLP (and one for each of ``gross_weights``, N; with ``site_planning`` the landing-site NLP
+    of each too), warms them up, then answers requests until told to stop or the pipe closes."""
     from helireach_ros.core.aircraft.model import initial_state_after_failure
     from helireach_ros.core.planning.planner import get_planner
+    from helireach_ros.core.policies.landing_sites import solve_site_or_anywhere
     from helireach_ros.core.policies.live_reachability import solve_with_cold_check
 
-    planner = get_planner(airframe, settings)
+    site_settings = settings.replace(objective="site") if site_planning else settings
+    held: dict[tuple[float, bool], None] = {}  # the recent (weight, site) NLPs, oldest first: in get_planner's cache
 
-    held: dict[float, None] = {}  # the recent weights, oldest first: a subset of get_planner's cache
-
-    def planner_for(gross_weight: float, announce: bool = False) -> Any:  # built at the first request, then cached
-        if math.isnan(gross_weight) or gross_weight == airframe.gross_weight:
-            return planner
-        building = gross_weight not in held
+    def planner_for(gross_weight: float, site: bool = False, announce: bool = False) -> Any:
+        """The NLP of a weight (NaN: the airframe's), for a site or not: built at its first request, then cached."""
+        weight = airframe.gross_weight if math.isnan(gross_weight) else gross_weight
+        building = (weight, site) not in held
         if building and announce:
             connection.send_bytes(_BUILDING)
-        weight_planner = get_planner(airframe.with_conditions(gross_weight=gross_weight), settings)
-        held.pop(gross_weight, None)
-        held[gross_weight] = None
-        while len(held) > _HELD_WEIGHTS:
+        model = airframe if weight == airframe.gross_weight else airframe.with_conditions(gross_weight=weight)
+        built = get_planner(model, site_settings if site else settings)
+        held.pop((weight, site), None)
+        held[(weight, site)] = None
+        while len(held) > 2 * (_HELD_WEIGHTS + 1):
             held.pop(next(iter(held)))
         if building and announce:
             connection.send_bytes(_BUILT)
-        return weight_planner
+        return built
 
+    warm_up_state = initial_state_after_failure(airframe, 150.0, 38.0)
     for gross_weight in (math.nan, *gross_weights):
         built = planner_for(gross_weight)
         if warm_up:
-            built.plan(initial_state_after_failure(airframe, 150.0, 38.0))
+            plan = built.plan(warm_up_state)
+        if site_planning:
+            site_built = planner_for(gross_weight, site=True)
+            if warm_up:  # a site around the touchdown-cost plan's touchdown
+                distance = float(plan.replay.touchdown_state[StateIndex.DISTANCE] - warm_up_state.distance)
+                site_built.plan(warm_up_state, touchdown_window=(distance - 30.0, distance + 30.0))
     connection.send_bytes(_READY)
     while True:
         try:
@@ -184,20 +198,37 @@ def _worker_main(
             return
         try:
             request = decode_dataclass(_SolveRequest, data)
-            solve = functools.partial(
-                planner_for(request.gross_weight, announce=True).plan,
-                initial_control=request.initial_control,
-                reaction_delay_s=request.reaction_delay_s,
-                disturbance=request.disturbance,
+            common: dict[str, Any] = {
+                "initial_control": request.initial_control,
+                "reaction_delay_s": request.reaction_delay_s,
+                "disturbance": request.disturbance,
+            }
+            anywhere_planner = planner_for(request.gross_weight, announce=True)
+            solve: Callable[[np.ndarray, Any], LandingPlan] = functools.partial(
+                _carried_solve, anywhere_planner, **common
             )
             if request.cold_check:
-                plan = solve_with_cold_check(solve, request.state, request.start)
+                solve = functools.partial(solve_with_cold_check, solve)
+            if request.touchdown_window is not None:
+                window = (float(request.touchdown_window[0]), float(request.touchdown_window[1]))
+                site_planner = planner_for(request.gross_weight, site=True, announce=True)
+                on_site: Callable[[np.ndarray, Any], LandingPlan] = functools.partial(
+                    _carried_solve, site_planner, touchdown_window=window, **common
+                )
+                if request.cold_check:
+                    on_site = functools.partial(solve_with_cold_check, on_site)
+                plan = solve_site_or_anywhere(on_site, solve, request.state, request.start)
             else:
                 plan = solve(request.state, request.start)
             reply = _SolveReply(plan, "")
         except (ValueError, RuntimeError) as error:
             reply = _SolveReply(None, f"{type(error).__name__}: {error}")
         connection.send_bytes(encode_dataclass(reply))
+
+
+def _carried_solve(planner: Any, state: np.ndarray, warm_start: Any, **request: Any) -> LandingPlan:
+    """``planner.plan`` with a warm start carried across the site row (a site plan starts a re-plan anywhere)."""
+    return planner.plan(state, planner.carried_warm_start(warm_start), **request)
 
 
 @dataclass
@@ -225,11 +256,15 @@ class _Worker:
         settings: PlannerSettings,
         warm_up: bool,
         gross_weights: tuple[float, ...] = (),
+        site_planning: bool = False,
     ) -> None:
         self.connection, child = context.Pipe(duplex=True)
         extra = tuple(weight for weight in gross_weights if weight != airframe.gross_weight)[-_HELD_WEIGHTS:]
         self.process = context.Process(
-            target=_worker_main, args=(child, airframe, settings, warm_up, extra), name="helireach_solver", daemon=True
+            target=_worker_main,
+            args=(child, airframe, settings, warm_up, extra, site_planning),
+            name="helireach_solver",
+            daemon=True,
         )
         self.process.start()
         child.close()
@@ -313,8 +348,14 @@ class SolverPool:
         reaction_delay_s: float | None = None,
         gross_weight: float | None = None,
         disturbance: np.ndarray | None = None,
+        touchdown_window: tuple[float, float] | None = None,
     ) -> Future:
         """Queues a solve; the future gives the :class:`~helireach_ros.core.planning.planner.LandingPlan`.
+
+        ``touchdown_window`` (start, end; m of touchdown distance from ``state``): land on that site, or anywhere if no
+        site plan is safe (:func:`~helireach_ros.core.policies.landing_sites.solve_site_or_anywhere`; the plan's own
+        ``touchdown_window`` says which it is). Needs :attr:`SolverPoolSettings.site_planning`, so no NLP is built
+        for it in a job.
 
         ``initial_control``, ``reaction_delay_s`` and ``disturbance`` are passed to
         :meth:`~helireach_ros.core.planning.planner.LandingPlanner.plan` (None: its defaults). ``gross_weight`` (N, None
@@ -332,9 +373,12 @@ class SolverPool:
         disturbance = None if disturbance is None else np.asarray(disturbance, dtype=float).reshape(-1)
         stored = warm_start if isinstance(warm_start, ControlFunctionWarmStart) else None
         solver_warm_start = None if isinstance(warm_start, ControlFunctionWarmStart) else warm_start
+        if touchdown_window is not None and not self.pool_settings.site_planning:
+            raise ValueError("a touchdown window needs a pool built with site_planning")
+        window = None if touchdown_window is None else np.asarray(touchdown_window, dtype=float).reshape(2)
         request = _SolveRequest(
             np.asarray(state, dtype=float).reshape(-1), solver_warm_start, cold_check, control, delay, weight,
-            disturbance, stored,
+            disturbance, stored, window,
         )  # fmt: skip
         payload = encode_dataclass(request)
         job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority, gross_weight=weight)
@@ -421,7 +465,14 @@ class SolverPool:
 
     # -- dispatcher thread -----------------------------------------------------------------------------------
     def _start_worker(self, gross_weights: tuple[float, ...] = ()) -> _Worker:
-        return _Worker(self._context, self.airframe, self.settings, self.pool_settings.warm_up, gross_weights)
+        return _Worker(
+            self._context,
+            self.airframe,
+            self.settings,
+            self.pool_settings.warm_up,
+            gross_weights,
+            self.pool_settings.site_planning,
+        )
 
     def _wake(self) -> None:
         try:

@@ -19,6 +19,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from nav_msgs.msg import Path as PathMsg
+from rclpy.logging import LoggingSeverity
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -27,6 +28,7 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
 from helireach_ros.core.planning.fallback import FallbackPlan
 from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
+from helireach_ros.core.policies.landing_sites import SiteSelection
 from helireach_ros.core.policies.landing_supervisor import EpisodeAction, LandingSupervisor, TimerAction
 from helireach_ros.core.policies.plan_status import (
     PlannerIdentity,
@@ -62,6 +64,7 @@ if TYPE_CHECKING:
 
 __all__ = ["LandingPlannerNode", "main"]
 
+_SEVERITIES = {"error": LoggingSeverity.ERROR, "warning": LoggingSeverity.WARN, "info": LoggingSeverity.INFO}
 _PLAN_HISTORY = 200  # robust verdicts kept for inspection (demo, tests)
 
 
@@ -80,6 +83,7 @@ class LandingPlannerNode(Node):
         self.robust_verdicts: list[tuple[RobustKey, RobustSummary | None]] = []  # published: (key, summary|None)
         self._backend: PlannerBackend | None = None  # None = not configured (a broken airframe or settings file)
         self.readings: LatestReadings | None = None
+        self.sites = self._site_selection()
         setup_error = ""
         try:
             from helireach_ros.core.ocp.settings import load_settings
@@ -90,7 +94,7 @@ class LandingPlannerNode(Node):
             self.get_logger().error(f"planner not configured, no plans will be made: {setup_error}")
         self.failures = FailurePlanner(
             self._backend, setup_error, self.supervisor, self.readings, self, self._now_ns,
-            zero_power=config.assume_total_power_loss, disturbance=config.disturbance_settings(),
+            zero_power=config.assume_total_power_loss, disturbance=config.disturbance_settings(), sites=self.sites,
         )  # fmt: skip
 
         def latched(message_type: Any, topic: str) -> Publisher:
@@ -110,7 +114,7 @@ class LandingPlannerNode(Node):
             self.live = LiveScheduler(
                 live_settings, self._backend, self.solver_thread, self._now_ns,
                 partial(self._publish, self._live_publisher, "live reachability"),
-                lambda plan, stamp_ns, frame: plan_messages(plan, stamp_ns, frame, config.world_frame),
+                lambda plan, stamp_ns, frame: plan_messages(plan, stamp_ns, frame, config.world_frame), self.sites,
             )  # fmt: skip
         # Inputs through a QosWatch: an incompatible publisher is an ERROR "<node>: QoS" on /diagnostics. The
         # failure event stays RELIABLE (one message per failure must not be lost; a best-effort one is reported).
@@ -132,6 +136,19 @@ class LandingPlannerNode(Node):
             self.create_timer(1.0 / self.live.settings.rate_hz, self._on_live_timer)
 
     # -- startup -----------------------------------------------------------------------------------------------
+    def _site_selection(self) -> SiteSelection | None:
+        """The landing sites; broken ones are an error and the node lands anywhere (a plan must still come)."""
+        try:
+            sites = self.config.site_selection()
+        except ValueError as error:
+            self.get_logger().error(f"landing sites not usable, landing anywhere: {error}")
+            return None
+        if sites is not None:
+            names = ", ".join(f"{site.name} {site.start_m:g}..{site.end_m:g} m" for site in sites.sites)
+            choice = sites.crew_choice or "automatic"
+            self.get_logger().info(f"landing sites: {names}; selected: {choice}")
+        return sites
+
     def _start_backend(self, airframe: Airframe, settings: PlannerSettings) -> None:
         """Loads the envelope, starts the solver pool (or builds the NLP here and warms it up), the estimators."""
         logger = self.get_logger()
@@ -140,7 +157,10 @@ class LandingPlannerNode(Node):
         # for other conditions is refused: cold starts, autorotation-entry fallback).
         self.airframe, self.settings = airframe, settings
         self.readings = LatestReadings(airframe, int(self.config.state_timeout * 1e9), rm.DEFAULT_BODY_FRAME)
-        backend_settings = self.config.backend_settings()
+        if self.sites is not None and settings.method != "flyable":
+            logger.error(f"landing sites need the flyable method, not {settings.method!r}: landing anywhere")
+            self.sites = None
+        backend_settings = self.config.backend_settings(site_planning=self.sites is not None)
         backend = PlannerBackend(airframe, settings, backend_settings, lambda level, text: report[level](text))
         self._backend = backend
         where = f"{backend_settings.solver_workers} solver workers" if backend.pool else "solving in this process"
@@ -215,6 +235,7 @@ class LandingPlannerNode(Node):
             return
         self.failures.fix_weight(self.live.latest_weight if self.live is not None else None)
         standby = self.live.pause(failure_stamp_ns) if self.live is not None else None
+        self.failures.fix_site(standby.site if standby is not None else None)
         if standby is not None and (plan := standby.verdict.plan) is not None:
             verdict = standby.verdict
             current = CurrentState(verdict.state, verdict.state_stamp_ns, standby.frame, RotorSource.MEASURED)
@@ -258,9 +279,17 @@ class LandingPlannerNode(Node):
 
     # -- publishing (the FailurePlanner's PlanSink) --------------------------------------------------------------
     def report(self, level: str, text: str, throttle_s: float = 0.0) -> None:
-        """A log line (the sink's report)."""
-        throttle = {"throttle_duration_sec": throttle_s} if throttle_s > 0.0 else {}
-        getattr(self.get_logger(), level)(text, **throttle)
+        """A log line (the sink's report). rclpy refuses one call site that logs at different severities or
+        filters, so each (severity, throttled) pair has its own line."""
+        logger = self.get_logger()
+        if throttle_s <= 0.0:
+            fast_logging.log_line(logger, _SEVERITIES[level], text)
+        elif level == "error":
+            logger.error(text, throttle_duration_sec=throttle_s)
+        elif level == "warning":
+            logger.warning(text, throttle_duration_sec=throttle_s)
+        else:
+            logger.info(text, throttle_duration_sec=throttle_s)
 
     def publish_fallback(self, failure: FailureEpisode, state: np.ndarray, stamp_ns: int, reason: str) -> None:
         """Publishes the fallback for ``state`` if the supervisor allows it (else says there is none)."""
@@ -368,6 +397,7 @@ class LandingPlannerNode(Node):
                 weight=standby or self.episode_weight,
                 standby=standby is not None,
                 robust_design=robust.design if robust_pending and robust is not None else None,
+                sites=self.failures.site_values(plan),
             )
             self._publish(self._status_publisher, "landing plan", report)
             self.supervisor.remember(failure, record, standby=standby is not None)

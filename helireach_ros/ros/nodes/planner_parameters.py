@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings
+from helireach_ros.core.policies.landing_sites import SiteSelection, parse_landing_sites
 from helireach_ros.core.policies.landing_supervisor import SupervisorSettings
 from helireach_ros.core.policies.live_reachability import LiveSettings
 from helireach_ros.core.workers.planner_backend import BackendSettings
@@ -84,6 +85,10 @@ class PlannerParameters:
         False, "verify each failure plan robustly in a low-priority process (the plan is published 'robust: pending')"
     )
     robust_uncertainty: str = parameter("", "uncertainty set of the robust verification ('' = config/uncertainty.yaml)")
+    landing_sites: str = parameter(
+        "", "landing sites along the track (odometry x, m): 'name:start_m:end_m' separated by ';' ('' = land anywhere)"
+    )
+    selected_site: str = parameter("", "the crew's landing site, by name ('' = automatic: the first reachable one)")
 
     # -- the core's settings, from these parameters ----------------------------------------------------------------
     @property
@@ -128,8 +133,21 @@ class PlannerParameters:
             disturbance=DisturbanceSettings(gain=self.disturbance_gain),
         )
 
-    def backend_settings(self) -> BackendSettings:
-        """How the node solves."""
+    def site_selection(self) -> SiteSelection | None:
+        """The landing sites and their selection (None: no sites, land anywhere).
+
+        Raises:
+            ValueError: a malformed site, or a selected site that is not in the list.
+        """
+        entries = [entry for entry in self.landing_sites.split(";") if entry.strip()]
+        if not entries:
+            if self.selected_site:
+                raise ValueError(f"selected_site {self.selected_site!r} given without landing_sites")
+            return None
+        return SiteSelection(parse_landing_sites(entries), self.selected_site)
+
+    def backend_settings(self, *, site_planning: bool = False) -> BackendSettings:
+        """How the node solves (``site_planning``: with usable landing sites)."""
         return BackendSettings(
             envelope_file=self.envelope_file,
             solver_workers=self.solver_workers,
@@ -142,4 +160,5 @@ class PlannerParameters:
             weight_error=self.weight_estimate_error,
             robust_policy=self.replanning_policy() if self.robust_verification else None,
             robust_uncertainty=self.robust_uncertainty,
+            site_planning=site_planning,
         )

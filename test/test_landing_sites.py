@@ -1,0 +1,172 @@
+"""Landing sites (core/policies/landing_sites.py) and site plans in the solver pool: parsing, the selection, the
+status keys, and "the site, else anywhere" with real IPOPT and the independent replay."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from helireach_ros.core.aircraft.model import initial_state_after_failure
+from helireach_ros.core.aircraft.state_index import StateIndex
+from helireach_ros.core.planning.footprint import touchdown_distance
+from helireach_ros.core.planning.planner import get_planner
+from helireach_ros.core.policies.landing_sites import (
+    LandingSite,
+    SiteSelection,
+    parse_landing_sites,
+    site_values,
+    solve_site_or_anywhere,
+)
+from helireach_ros.core.policies.plan_status import site_text
+from helireach_ros.core.units import FT, KT
+from helireach_ros.core.workers.solver_pool import SolverPool, SolverPoolSettings
+
+_START_M = 1000.0  # the state's along-track distance: sites are in world metres, windows from the state
+
+
+def test_sites_parse_from_the_parameter_and_bad_ones_are_refused() -> None:
+    sites = parse_landing_sites(["field:600:700", " runway : 900.5 : 1200 "])
+    assert sites == (LandingSite("field", 600.0, 700.0), LandingSite("runway", 900.5, 1200.0))
+    for bad in (["field:700"], ["field:a:700"], ["field:700:600"], ["field:nan:700"], [":1:2"], ["a:1:2", "a:3:4"]):
+        with pytest.raises(ValueError):
+            parse_landing_sites(bad)
+    site = sites[0]
+    state = np.zeros(6)
+    state[StateIndex.DISTANCE] = 650.0
+    assert site.window_from(state) == (-50.0, 50.0)
+    assert site.contains(650.0) and not site.contains(701.0)
+    assert site.margin_m(640.0) == 40.0 and site.margin_m(590.0) == -10.0
+
+
+def test_the_crew_choice_holds_and_an_automatic_selection_moves_on_from_an_unreachable_site() -> None:
+    sites = parse_landing_sites(["a:0:10", "b:20:30", "c:40:50"])
+    with pytest.raises(ValueError, match="not one of"):
+        SiteSelection(sites, "d")
+    crew = SiteSelection(sites, "b")
+    crew.record(sites[1], False)
+    assert crew.selected() == sites[1]  # the crew's site stays selected; the plans say it is not reachable
+    automatic = SiteSelection(sites)
+    assert automatic.selected() == sites[0] and automatic.reachability(sites[0]) is None
+    automatic.record(sites[0], True)
+    assert automatic.selected() == sites[0] and automatic.reachable_count() == 1
+    automatic.record(sites[0], False)
+    assert automatic.selected() == sites[1] and automatic.reachable_count() == 0
+    automatic.record(sites[2], False)  # evidence about another site does not move the selection
+    assert automatic.selected() == sites[1]
+    automatic.forget()
+    assert automatic.selected() == sites[0] and automatic.reachability(sites[2]) is None
+
+
+@pytest.fixture(scope="module")
+def state(airframe) -> np.ndarray:
+    at = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+    at[StateIndex.DISTANCE] = _START_M
+    return at
+
+
+@pytest.fixture(scope="module")
+def anywhere(airframe, settings, state):
+    """The touchdown-cost plan from 500 ft / 75 kt: where the aircraft lands without a site."""
+    return get_planner(airframe, settings).plan(state)
+
+
+def _solvers(airframe, settings, site: LandingSite, state: np.ndarray):
+    on_site = get_planner(airframe, settings.replace(objective="site"))
+    planner = get_planner(airframe, settings)
+
+    def solve_site(at, warm):
+        return on_site.plan(at, on_site.carried_warm_start(warm), touchdown_window=site.window_from(at))
+
+    def solve_anywhere(at, warm):
+        return planner.plan(at, planner.carried_warm_start(warm))
+
+    return solve_site, solve_anywhere
+
+
+def test_a_reachable_site_beyond_the_natural_touchdown_is_landed_on_and_its_status_says_so(
+    airframe, settings, state, anywhere
+) -> None:
+    natural = _START_M + touchdown_distance(anywhere)
+    site = LandingSite("beyond", natural + 40.0, natural + 100.0)  # the footprint's far end is ~120 m beyond
+    plan = solve_site_or_anywhere(*_solvers(airframe, settings, site, state), state, anywhere.warm_start)
+    assert plan.safe and plan.verified and plan.touchdown_window is not None
+    values = site_values(site, plan, reachable_count=1)
+    assert values["on_site"] is True and values["site_planned"] is True and values["sites_reachable"] == 1
+    assert site.contains(values["touchdown_distance_m"]) and values["site_margin_m"] >= 0.0
+    assert values["touchdown_distance_m"] == pytest.approx(plan.replay.touchdown_state[StateIndex.DISTANCE])
+    assert "on site beyond" in site_text(values, plan.safe)
+
+
+def test_an_unreachable_site_lands_anywhere_and_says_both(airframe, settings, state, anywhere) -> None:
+    site = LandingSite("too_far", _START_M + 5000.0, _START_M + 5100.0)  # ~16,000 ft from 500 ft: out of reach
+    plan = solve_site_or_anywhere(*_solvers(airframe, settings, site, state), state, anywhere.warm_start)
+    assert plan.safe and plan.touchdown_window is None  # the state can land, off-site
+    values = site_values(site, plan)
+    assert values["on_site"] is False and values["site_planned"] is False and "sites_reachable" not in values
+    assert values["site_margin_m"] < -4000.0
+    text = site_text(values, plan.safe)
+    assert "too_far NOT reachable: landing off-site" in text
+    assert site_text(values, False).endswith("too_far NOT reachable")  # never "off-site" for a plan that cannot land
+
+
+def test_a_warm_start_crosses_between_the_site_and_the_anywhere_nlp(airframe, settings, state, anywhere) -> None:
+    on_site = get_planner(airframe, settings.replace(objective="site"))
+    carried = on_site.carried_warm_start(anywhere.warm_start)
+    assert carried.constraint_multipliers.size == anywhere.warm_start.constraint_multipliers.size + 1
+    window = (touchdown_distance(anywhere) - 20.0, touchdown_distance(anywhere) + 20.0)
+    plan = on_site.plan(state, carried, touchdown_window=window)
+    assert plan.solver.warm_started and plan.safe
+    back = get_planner(airframe, settings).carried_warm_start(plan.warm_start)
+    assert np.array_equal(back.constraint_multipliers, plan.warm_start.constraint_multipliers[:-1])
+    with pytest.raises(ValueError, match="another NLP"):  # an uncarried one is refused, as before
+        on_site.plan(state, anywhere.warm_start, touchdown_window=window)
+
+
+def test_the_pool_lands_on_a_site_or_anywhere_and_refuses_a_window_without_site_planning(
+    airframe, settings, state, anywhere
+) -> None:
+    natural = touchdown_distance(anywhere)
+    with SolverPool(airframe, settings, SolverPoolSettings(workers=1, site_planning=True)) as pool:
+        assert pool.wait_ready(120.0)
+        on_site = pool.plan(state, None, touchdown_window=(natural - 200.0, natural - 120.0), timeout_s=20.0)
+        assert on_site.safe and on_site.touchdown_window is not None
+        assert natural - 200.0 <= touchdown_distance(on_site) <= natural - 120.0
+        live = pool.plan(state, on_site.warm_start, cold_check=True, touchdown_window=(5000.0, 5100.0), timeout_s=20.0)
+        assert live.safe and live.touchdown_window is None  # off-site: the state can still land
+        assert math.isclose(touchdown_distance(live), natural, rel_tol=0.05)
+    with SolverPool(airframe, settings, SolverPoolSettings(workers=1, warm_up=False)) as plain:
+        with pytest.raises(ValueError, match="site_planning"):
+            plain.submit(state, None, touchdown_window=(0.0, 10.0))
+
+
+def test_the_site_keys_of_a_plan_and_a_live_status_are_documented(airframe, state, anywhere) -> None:
+    import re
+    from pathlib import Path
+
+    from helireach_ros.core.estimation.weight_tracking import WeightChoice
+    from helireach_ros.core.policies.failure_episode import FailureEpisode
+    from helireach_ros.core.policies.live_reachability import LiveVerdict
+    from helireach_ros.core.policies.plan_status import PlannerIdentity, converged_plan_report, live_report
+
+    def documented(page: str) -> set[str]:
+        text = (Path(__file__).resolve().parent.parent / "msg_docs" / page).read_text(encoding="utf-8")
+        return set(re.findall(r"`([a-z_0-9]+)`", text))
+
+    site = LandingSite("field", _START_M + 5000.0, _START_M + 5100.0)
+    values = site_values(site, anywhere, reachable_count=0)
+    weight = WeightChoice(airframe.gross_weight, "file", 0.0, "")
+    report = converged_plan_report(
+        anywhere, identity=PlannerIdentity(airframe.name, airframe.gross_weight, airframe.density_altitude),
+        failure=FailureEpisode(1, 10, 10), stamp_ns=10, warm_source="none", rotor_source="measured", replan_index=0,
+        lateness=None, latency_ms=1.0, weight=weight, standby=False, sites=values,
+    )  # fmt: skip
+    assert report.level == "OK" and "field NOT reachable: landing off-site" in report.text
+    assert set(values) <= set(report.values) <= documented("helireach_plan_status.md")
+    verdict = LiveVerdict("safe", anywhere.value, state, 9, 10, 12.0, anywhere, "")
+    live = live_report(
+        verdict, standby=True, weight=weight, configured_weight=airframe.gross_weight, power_fraction=0.0, now_ns=11,
+        sites=values,
+    )  # fmt: skip
+    assert live.level == "OK" and set(live.values) <= documented("helireach_live_reachability.md")
