@@ -52,6 +52,7 @@ nlp-cache: $(STAMP)
 bench: $(STAMP) nlp-cache
 	$(BIN)/python bench/plan_latency.py --json
 	$(BIN)/python bench/failure_latency.py --json
+	$(BIN)/python bench/site_latency.py --json
 	$(BIN)/python bench/envelope_throughput.py --json
 	$(BIN)/python bench/replay_failures.py --heights 9 --speeds 7 --json
 	$(BIN)/python bench/closed_loop_latency.py --json

@@ -2,11 +2,11 @@
 
 Run: .venv/bin/python bench/results_pages.py [--data docs/results/data] [--out docs/results]
 
-Pages: ``performance.md`` (plan latency, failure to trajectory, envelope throughput), ``closed-loop.md``
-(closed-loop latency tolerance, Monte Carlo) and ``replay-failures.md``. Each section states what is measured,
-tabulates the record's numbers and ends with the record's command, commit, date, machine and load average; a
-section whose record is missing says which command makes it. The records are written by the benches' ``--json``
-(``make bench`` runs them all, then this script).
+Pages: ``performance.md`` (plan latency, failure to trajectory, landing-site plans, envelope throughput),
+``closed-loop.md`` (closed-loop latency tolerance, Monte Carlo) and ``replay-failures.md``. Each section states what
+is measured, tabulates the record's numbers and ends with the record's command, commit, date, machine and load
+average; a section whose record is missing says which command makes it. The records are written by the benches'
+``--json`` (``make bench`` runs them all, then this script).
 """
 
 from __future__ import annotations
@@ -352,6 +352,37 @@ def monte_carlo(numbers: Mapping) -> str:
     return "\n\n".join(parts)
 
 
+def _p50_p90_max(stats: Mapping[str, float]) -> str:
+    return " / ".join(_number(stats[key]) for key in ("p50", "p90", "max"))
+
+
+def site_latency(numbers: Mapping) -> str:
+    kinds = numbers["kinds"]
+    table = _table(
+        ("kind", "safe", "IPOPT ms p50 / p90 / max", "whole plan() ms p50 / p90 / max", "total vs "
+         f"{numbers['baseline']} (IPOPT / wall)", "iterations (mean)"),
+        [
+            (kind, f"{result['safe']}/{result['n']}", _p50_p90_max(result["solve_ms"]), _p50_p90_max(result["wall_ms"]),
+             f"{_number(result['ratio_solve'], 2)}× / {_number(result['ratio_wall'], 2)}×",
+             _number(result["iterations_mean"]))
+            for kind, result in kinds.items()
+        ],
+    )  # fmt: skip
+    nlps = numbers["nlps"]
+    footprint = numbers["footprint"]["solve"]
+    lines = [
+        table,
+        f"{numbers['timed_states']} states timed of the grid's {numbers['grid']} (the others: the anywhere plan not "
+        f"safe or a footprint end not verified); sites {numbers['site_length_m']:g} m long, the unreachable one "
+        f"{numbers['unreachable_beyond_m']:g} m beyond the farthest end. The footprint (4 NLPs) took "
+        f"{_p50_p90_max(footprint)} ms of IPOPT time per state (p50 / p90 / max). NLPs: anywhere on "
+        f"{nlps['anywhere']['functions'].split(' /')[0]} with {nlps['anywhere']['linear_solver'].split(' /')[0]}; "
+        f"site on {nlps['site']['functions'].split(' (')[0]} with {nlps['site']['linear_solver']}.",
+    ]
+    lines += [f"- {note}" for note in numbers["notes"]]
+    return "\n\n".join(lines[:2]) + ("\n\n" + "\n".join(lines[2:]) if len(lines) > 2 else "")
+
+
 def replay_failures(numbers: Mapping) -> str:
     rows = [
         [name, row["nlp_safe"], row["replay_fails"], f"{row['replay_fail_percent']:.1f} %", row["safe"],
@@ -427,6 +458,16 @@ PAGES = (
                 "plan is the live evaluation's plan, published at once; the refined plan is solved from the state at "
                 "the failure.",
                 failure_latency,
+            ),
+            Section(
+                "site_latency",
+                "Landing-site plans",
+                "What a plan for a landing site (the touchdown held inside a stretch of the track) costs against the "
+                "plan that lands anywhere, from the same failure states (200–700 ft × 40–100 kt), interleaved: warm "
+                "from the anywhere plan of a state 10 ft and 2.5 kt away, a site beyond and one short of the natural "
+                "touchdown inside the reachable footprint, and a site out of reach (the site attempt, then a cold "
+                "plan anywhere, as the planner node does). The ratios are totals over the same states.",
+                site_latency,
             ),
             Section(
                 "envelope_throughput",

@@ -13,6 +13,7 @@ from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.planning.footprint import touchdown_distance
 from helireach_ros.core.planning.planner import get_planner
 from helireach_ros.core.policies.landing_sites import (
+    SITE_RETRY_EVERY,
     LandingSite,
     SiteSelection,
     parse_landing_sites,
@@ -57,6 +58,18 @@ def test_the_crew_choice_holds_and_an_automatic_selection_moves_on_from_an_unrea
     assert automatic.selected() == sites[1]
     automatic.forget()
     assert automatic.selected() == sites[0] and automatic.reachability(sites[2]) is None
+
+
+def test_a_site_found_unreachable_is_tried_again_only_every_few_solves() -> None:
+    site, other = parse_landing_sites(["a:0:10", "b:20:30"])
+    selection = SiteSelection([site, other], "a")
+    assert selection.worth_trying(site)  # nothing known: try it
+    selection.record(site, False)
+    answers = [selection.worth_trying(site) for _ in range(2 * SITE_RETRY_EVERY)]
+    assert answers == ([False] * (SITE_RETRY_EVERY - 1) + [True]) * 2
+    assert selection.worth_trying(other)  # per site
+    selection.record(site, True)
+    assert all(selection.worth_trying(site) for _ in range(SITE_RETRY_EVERY + 1))
 
 
 @pytest.fixture(scope="module")
@@ -170,3 +183,64 @@ def test_the_site_keys_of_a_plan_and_a_live_status_are_documented(airframe, stat
         sites=values,
     )  # fmt: skip
     assert live.level == "OK" and set(live.values) <= documented("helireach_live_reachability.md")
+
+
+def test_the_live_footprint_takes_evaluation_slots_and_says_what_it_knows_of_each_site(airframe, settings) -> None:
+    """The live scheduler with a real solver pool: footprints come every period, verdicts keep coming between them
+    and aim at the selected site, and a site beyond the verified far end is not reachable."""
+    import threading
+    import time
+
+    from helireach_ros.core.policies.live_reachability import LiveSettings
+    from helireach_ros.core.policies.vehicle_readings import CurrentState, RotorSource
+    from helireach_ros.core.workers.live_scheduling import LiveScheduler
+    from helireach_ros.core.workers.planner_backend import BackendSettings, PlannerBackend
+    from helireach_ros.core.workers.solver_thread import SolverThread
+
+    measured = initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array()
+    measured[StateIndex.DISTANCE] = _START_M
+    ahead, far = f"ahead:{_START_M + 650}:{_START_M + 700}", f"far:{_START_M + 5000}:{_START_M + 5100}"
+    sites = SiteSelection(parse_landing_sites([ahead, far]))
+    backend = PlannerBackend(
+        airframe,
+        settings,
+        BackendSettings(envelope_file="none", solver_workers=1, site_planning=True, footprint=True),
+        lambda level, text: None,
+    )
+    verdicts, footprints = [], []
+    lock = threading.Lock()
+
+    def collect(into):
+        def append(report):
+            with lock:
+                into.append(report)
+
+        return append
+
+    solver_thread = SolverThread(lambda text: None)
+    try:
+        scheduler = LiveScheduler(
+            LiveSettings(rate_hz=5.0, max_state_age_s=1.0), backend, solver_thread, time.monotonic_ns,
+            collect(verdicts), lambda plan, stamp_ns, frame: None, sites,
+            footprint_period_s=1.0, publish_footprint=collect(footprints),
+        )  # fmt: skip
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline:
+            with lock:
+                if len(footprints) >= 2 and len(verdicts) >= 4:
+                    break
+            scheduler.tick(CurrentState(measured, time.monotonic_ns(), "base_stabilized", RotorSource.MEASURED))
+            time.sleep(0.02)
+    finally:
+        backend.close()
+        solver_thread.shutdown()
+    assert len(footprints) >= 2 and len(verdicts) >= 4, (len(footprints), len(verdicts))
+    for report in footprints:
+        values = report.values
+        assert values["farthest_verified"] is True and 700.0 < values["farthest_m"] < 1000.0, report.text
+        assert values["farthest_distance_m"] == pytest.approx(_START_M + values["farthest_m"])
+        assert values["site_far"] == "not_reachable"  # beyond a verified end: not even in the model
+        assert values["site_ahead"] in ("reachable", "unknown")  # "unknown" only while the near end is not verified
+        assert report.level == ("OK" if values["nearest_verified"] else "WARN")
+    assert all(report.values["landing_site"] == "ahead" for report in verdicts)
+    assert any(report.values["on_site"] for report in verdicts)

@@ -61,3 +61,19 @@ def test_into_the_wind_the_landing_is_shorter_and_slower_over_the_ground_downwin
     assert touchdown_distance(into) < touchdown_distance(calm)
     # a 15 kt tailwind adds 15 kt to a touchdown the flare cannot bring below ~13 kt of airspeed: over the limit
     assert not downwind.safe and downwind.touchdown_ground_speed > airframe.limits.max_forward_speed
+
+
+def test_into_the_wind_the_touchdown_cost_plan_makes_contact_instead_of_grazing_and_is_verified(airframe) -> None:
+    """Into a 15 kt wind the touchdown cost could reach J = −1 (no sink, no ground speed): a graze whose replayed
+    contact comes at the flare attitude. The wind's minimum touchdown descent rate makes it a contact."""
+    settings = load_settings()
+    windy = airframe.with_conditions(headwind=HEADWIND)
+    state = initial_state_after_failure(windy, 500 * FT, 75 * KT).as_array()
+    plan = get_planner(windy, settings).plan(state)
+    assert plan.safe and plan.verified and plan.replay.flyability.within_limits
+    floor = settings.wind_touchdown_min_descent_rate
+    assert plan.states[StateIndex.DESCENT_RATE, -1] >= floor - 1e-6
+    assert plan.value > -1.0 + 0.5 * floor / airframe.limits.max_descent_rate  # off the degenerate floor
+    assert 0.0 <= plan.touchdown_ground_speed < 5 * KT
+    calm = get_planner(airframe, settings).plan(initial_state_after_failure(airframe, 500 * FT, 75 * KT).as_array())
+    assert calm.states[StateIndex.DESCENT_RATE, -1] > 1.0  # calm keeps its own touchdown (the bound is wind's only)

@@ -125,11 +125,16 @@ def run_demo(
     estimate_weight: bool | None = None,
     robust_verification: bool = True,
     site: LandingSite | None = None,
+    footprint_period_s: float = 0.0,
+    headwind_kt: float = 0.0,
 ) -> DemoResult:
     """Runs the demo (see the module docstring) and returns what it produced.
 
     ``mismatch``: a preset the vehicle flies (None: the scenario's own); ``estimate_weight``: the planner's
-    parameter (None: on with a preset, else its configured value); ``site``: a landing site (None: anywhere).
+    parameter (None: on with a preset, else its configured value); ``site``: a landing site (None: anywhere);
+    ``footprint_period_s``: the planner's live footprint period (0: off); ``headwind_kt``: the wind the vehicle flies
+    in and every node is told of (the aircraft parameter ``headwind``; the status node then has no envelope: the
+    shipped ones are calm).
     """
     if estimate_weight is None and mismatch is not None:
         estimate_weight = True  # the presets are there to show what the estimate buys
@@ -153,7 +158,9 @@ def run_demo(
         scenario=scenario,
         extra_nodes=extra,
         context=context,
-        ros_args=demo_ros_arguments(mismatch, estimate_weight, robust_verification, site),
+        ros_args=demo_ros_arguments(
+            mismatch, estimate_weight, robust_verification, site, footprint_period_s, headwind_kt
+        ),
         executor=executor,
         command="python -m helireach_ros.cli.demo",
     )
@@ -220,9 +227,11 @@ def demo_ros_arguments(
     estimate_weight: bool | None,
     robust_verification: bool = True,
     site: LandingSite | None = None,
+    footprint_period_s: float = 0.0,
+    headwind_kt: float = 0.0,
 ) -> list[str]:
     """The ``-p`` arguments for a mismatch preset (the vehicle), the planner's ``estimate_weight``, its
-    ``robust_verification`` and its ``landing_sites``.
+    ``robust_verification``, its ``landing_sites`` and its ``footprint_period``, and every node's ``headwind``.
 
     Raises:
         ValueError: an unknown preset.
@@ -237,6 +246,12 @@ def demo_ros_arguments(
     arguments += ["-p", f"helireach_planner:robust_verification:={'true' if robust_verification else 'false'}"]
     if site is not None:
         arguments += ["-p", f"helireach_planner:landing_sites:={site.name}:{site.start_m:.3f}:{site.end_m:.3f}"]
+    if footprint_period_s > 0.0:
+        arguments += ["-p", f"helireach_planner:footprint_period:={footprint_period_s:g}"]
+    if headwind_kt:
+        from helireach_ros.core.units import KT
+
+        arguments += ["-p", f"headwind:={headwind_kt * KT!r}"]
     return arguments
 
 
@@ -419,6 +434,21 @@ def _add_arguments(parser: argparse.ArgumentParser) -> None:
         help="a landing site along the track, ft from where the run starts (the failure comes ~415 ft in); the "
         "planner lands on it (e.g. 2400:2800)",
     )
+    parser.add_argument(
+        "--footprint-period",
+        type=float,
+        default=0.0,
+        metavar="S",
+        help="the planner's live reachable footprint at most every S s before the failure (0 = off, the default)",
+    )
+    parser.add_argument(
+        "--headwind-kt",
+        "--wind-kt",
+        type=float,
+        default=0.0,
+        help="a steady wind along the track [kt], positive against the flight: the vehicle flies in it, the planner "
+        "plans for it (the status node has no envelope for it: the shipped ones are calm)",
+    )
     parser.add_argument("--hold", action="store_true", help="keep the nodes running after touchdown until Ctrl-C")
     parser.add_argument(
         "--no-display", dest="display", action="store_false", help="do not serve the cockpit display page"
@@ -450,6 +480,8 @@ def _run(arguments: argparse.Namespace) -> int:
             estimate_weight=arguments.estimate_weight,
             robust_verification=arguments.robust_verification,
             site=site,
+            footprint_period_s=arguments.footprint_period,
+            headwind_kt=arguments.headwind_kt,
         )
     except (FileNotFoundError, ValueError) as error:  # a missing parameter file, a bad parameter or scenario
         print(f"helireach demo: {error}", file=sys.stderr)

@@ -61,7 +61,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--weight-lb", type=float, default=None, help="override the gross weight [lbf]")
     parser.add_argument("--density-altitude-ft", type=float, default=None, help="override the density altitude [ft]")
     parser.add_argument(
-        "--headwind-kt", type=float, default=None, help="a steady headwind along the track [kt] (negative: tailwind)"
+        "--headwind-kt",
+        "--wind-kt",
+        type=float,
+        default=None,
+        help="a steady headwind along the track [kt] (negative: tailwind)",
     )
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     parser.add_argument("--plot", default=None, metavar="FILE.png", help="write the trajectory figure")
@@ -90,10 +94,14 @@ def run_plan(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.units import FT, KT, LBF
 
     try:
-        airframe = load_airframe(arguments.airframe).with_rotor_model_choice(arguments.rotor_model).with_conditions(
-            gross_weight=None if arguments.weight_lb is None else arguments.weight_lb * LBF,
-            density_altitude=None if arguments.density_altitude_ft is None else arguments.density_altitude_ft * FT,
-            headwind=None if arguments.headwind_kt is None else arguments.headwind_kt * KT,
+        airframe = (
+            load_airframe(arguments.airframe)
+            .with_rotor_model_choice(arguments.rotor_model)
+            .with_conditions(
+                gross_weight=None if arguments.weight_lb is None else arguments.weight_lb * LBF,
+                density_altitude=None if arguments.density_altitude_ft is None else arguments.density_altitude_ft * FT,
+                headwind=None if arguments.headwind_kt is None else arguments.headwind_kt * KT,
+            )
         )
         settings = load_settings(
             arguments.settings, method=arguments.method, reaction_delay_s=arguments.reaction_delay_s

@@ -66,6 +66,7 @@ __all__ = [
     "TOPIC_LIVE_REACHABILITY",
     "TOPIC_ODOMETRY",
     "TOPIC_PLAN_STATUS",
+    "TOPIC_REACHABLE_FOOTPRINT",
     "TOPIC_READY",
     "TOPIC_ROBUST_VERDICT",
     "TOPIC_ROTOR",
@@ -103,6 +104,7 @@ TOPIC_FAILURE_EVENT = "/helireach/failure_event"
 TOPIC_FAILURE_EPISODE = "/helireach/failure_episode"
 TOPIC_SAFETY_STATUS = "/helireach/safety_status"
 TOPIC_LIVE_REACHABILITY = "/helireach/live_reachability"
+TOPIC_REACHABLE_FOOTPRINT = "/helireach/reachable_footprint"
 TOPIC_LANDING_TRAJECTORY = "/helireach/landing_trajectory"
 TOPIC_LANDING_PATH = "/helireach/landing_path"
 TOPIC_PLAN_STATUS = "/helireach/plan_status"
@@ -181,6 +183,7 @@ TOPICS: dict[str, TopicSpec] = {
             TOPIC_SAFETY_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_envelope_status"
         ),
         TopicSpec(TOPIC_LIVE_REACHABILITY, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
+        TopicSpec(TOPIC_REACHABLE_FOOTPRINT, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_TRAJECTORY, "trajectory_msgs/msg/JointTrajectory", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_PATH, "nav_msgs/msg/Path", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_PLAN_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),

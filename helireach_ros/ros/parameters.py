@@ -34,6 +34,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from helireach_ros.core.aircraft.airframe import MAX_WIND
 from helireach_ros.core.resources import config_path
 
 _Table = TypeVar("_Table")
@@ -267,9 +268,10 @@ def _unknown_overrides(node: Node, also_known: Collection[str]) -> dict[str, str
 def declare_aircraft(node: Node) -> Callable[[], Any]:
     """Declares the aircraft parameters shared by the planner and the envelope status node.
 
-    ``airframe`` (name or file), ``gross_weight`` (N, 0 = the airframe file's) and ``density_altitude``
-    (m, NaN = the file's): config/nodes.yaml keeps them in its ``/**`` section so one bare
-    ``-p gross_weight:=…`` sets them for every node, and the plans and the status describe the same aircraft.
+    ``airframe`` (name or file), ``gross_weight`` (N, 0 = the airframe file's), ``density_altitude``
+    (m, NaN = the file's) and ``headwind`` (m/s, 0 = calm): config/nodes.yaml keeps them in its ``/**`` section so
+    one bare ``-p gross_weight:=…`` sets them for every node, and the plans and the status describe the same
+    aircraft.
 
     Returns:
         A function loading that :class:`~helireach_ros.core.aircraft.airframe.Airframe` (raises ``ConfigError`` on a bad
@@ -281,12 +283,16 @@ def declare_aircraft(node: Node) -> Callable[[], Any]:
     density_altitude = declare(
         "density_altitude", math.nan, "today's density altitude, m (NaN = the file's)", (-1000.0, 9000.0)
     )
+    headwind = declare(
+        "headwind", 0.0, "today's steady wind along the track, m/s, positive against the flight (< 0: tailwind)",
+        (-MAX_WIND, MAX_WIND),
+    )  # fmt: skip
 
     def load() -> Any:
         from helireach_ros.core.aircraft.airframe import load_airframe
 
         return load_airframe(name).with_conditions(
-            gross_weight or None, None if math.isnan(density_altitude) else density_altitude
+            gross_weight or None, None if math.isnan(density_altitude) else density_altitude, headwind
         )
 
     return load

@@ -834,11 +834,13 @@ def settings_differences(stored: dict[str, Any], settings: PlannerSettings) -> l
 
 def _describe_conditions(airframe: dict[str, Any]) -> str:
     try:
-        from helireach_ros.core.units import LBF
+        from helireach_ros.core.units import KT, LBF
 
+        wind = float(airframe.get("headwind", 0.0))  # absent: calm (a calm airframe's digest leaves it out)
         return (
             f"W = {float(airframe['gross_weight']) / LBF:.0f} lbf, "
-            f"density altitude {float(airframe['density_altitude']) / FT:.0f} ft"
+            f"density altitude {float(airframe['density_altitude']) / FT:.0f} ft, "
+            + (f"headwind {wind / KT:+.0f} kt" if wind else "calm")
         )
     except (KeyError, TypeError, ValueError):
         return "conditions unknown"

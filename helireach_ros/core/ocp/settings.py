@@ -76,6 +76,19 @@ class PlannerSettings:
         site_backoff_m: how far inside a landing site's ends the NLP holds its touchdown, m (the replay judges the
             site's true ends: 3 m covers the replayed touchdown's drift from the NLP's, 0.6 m at 500 ft / 75 kt;
             assumed).
+        site_max_iterations: IPOPT's iteration limit for a site plan (the ``site`` objective), at most
+            ``max_iterations``. IPOPT does not find a site beyond the aircraft's reach infeasible: it runs to its limit
+            (measured, ``bench/site_latency.py``: 300 iterations, ~2 s per attempt, on the site NLP's plain CasADi
+            functions), and the planner then lands anywhere; a reachable site's plan took 17-21 iterations warm and
+            35-37 cold on average. 100 bounds the attempt to about a third of that (assumed; a plan that needs more
+            is answered off-site, never unsafe).
+        wind_touchdown_min_descent_rate: with wind (the airframe's ``headwind`` not 0), the plan touches down at no
+            less than this descent rate, m/s (0.3 ≈ 1 ft/s; assumed). Into wind the touchdown cost can reach its floor,
+            J = −1, at zero ground speed and zero descent rate: the plan then grazes the ground, and the replay's
+            contact, whose time a centimetre of height moves by tens of milliseconds at a near-zero descent rate,
+            comes with the flare attitude outside the touchdown window (measured from 500 ft / 75 kt into 15 kt:
+            J = −1.000, replayed touchdown attitude 14.8° nose-up against 12°, UNVERIFIED; with this bound J = −0.877,
+            1.0 ft/s and 1.8 kt replayed, SAFE). Calm NLPs are unchanged (the shipped envelopes are calm).
         closed_form_states: verified and flyable: the distance z and the engine power P are not decision
             variables but their collocation solutions in closed form (z the quadrature of v, P the solution
             of Ṗ = −P/τ), which satisfy their collocation equations exactly; neither feeds back into the
@@ -106,6 +119,13 @@ class PlannerSettings:
     objective: str = "terminal"
     footprint_margin: float = 0.05
     site_backoff_m: float = 3.0
+    site_max_iterations: int = 100
+    wind_touchdown_min_descent_rate: float = 0.3
+
+    @property
+    def iteration_limit(self) -> int:
+        """IPOPT's ``max_iter`` for this NLP: ``max_iterations``, or ``site_max_iterations`` for a site plan."""
+        return min(self.max_iterations, self.site_max_iterations) if self.objective == "site" else self.max_iterations
 
     def __post_init__(self) -> None:
         problems = []
@@ -120,6 +140,7 @@ class PlannerSettings:
             ("degree", 1, 9),
             ("paper_points", 3, 200),
             ("max_iterations", 1, 100000),
+            ("site_max_iterations", 1, 100000),
             ("replay_samples_per_interval", 1, 1000),
         )
         for name, low, high in integer_ranges:
@@ -141,6 +162,7 @@ class PlannerSettings:
             ("reaction_delay_s", 0.0, 10.0),
             ("footprint_margin", 0.0, 0.5),
             ("site_backoff_m", 0.0, 100.0),
+            ("wind_touchdown_min_descent_rate", 0.0, 5.0),
         )
         for name, real_low, real_high in real_ranges:
             value = getattr(self, name)

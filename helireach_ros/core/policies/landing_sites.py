@@ -12,7 +12,15 @@ site while its plans land on it, and moves on to the next site of the list after
 
 **Site, then anywhere** (:func:`solve_site_or_anywhere`): a state from which the selected site cannot be reached
 may still land off-site. The planner then lands anywhere, and the status says both ("site X not reachable; landing
-off-site"), never "unsafe" for a state that can land.
+off-site"), never "unsafe" for a state that can land. A site attempt that cannot succeed is the expensive case (IPOPT
+runs to ``site_max_iterations``: ~0.3-0.6 s), so after a solve found the site not reachable the next solves go
+straight to anywhere and try the site again only every :data:`SITE_RETRY_EVERY`-th time
+(:meth:`SiteSelection.worth_trying`): the live rate and the re-plans keep their pace, and a site that comes back
+within reach is found again within a few solves.
+
+**The live footprint** (:func:`footprint_report`): the nearest and farthest replay-verified touchdowns from the latest
+measured state (:mod:`~helireach_ros.core.planning.footprint`), and what they say of each site: beyond a verified end
+it is not reachable; between two verified ends it overlaps what the aircraft can reach (a site plan decides).
 """
 
 from __future__ import annotations
@@ -26,17 +34,28 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from helireach_ros.core.aircraft.state_index import StateIndex
+from helireach_ros.core.planning.footprint import ReachableFootprint, SiteReachability
+from helireach_ros.core.policies.plan_status import StatusReport
 
 if TYPE_CHECKING:
     from helireach_ros.core.planning.planner import LandingPlan
 
 __all__ = [
+    "SITE_RETRY_EVERY",
     "LandingSite",
     "SiteSelection",
+    "footprint_off_reason",
+    "footprint_off_report",
+    "footprint_report",
     "parse_landing_sites",
     "site_values",
     "solve_site_or_anywhere",
 ]
+
+
+SITE_RETRY_EVERY = 5
+"""After a solve found a site not reachable, every this-many-th solve tries it again (the others land anywhere at
+once); at the live rate (5 Hz) a site that comes back within reach is found within a second (assumed)."""
 
 
 @dataclass(frozen=True)
@@ -116,6 +135,7 @@ class SiteSelection:
         self.crew_choice = selected
         self._lock = threading.Lock()
         self._reachable: dict[str, bool] = {}  # the latest evidence per site name
+        self._skipped: dict[str, int] = {}  # solves that went straight to anywhere since the site was not reachable
         self._current = 0
 
     def selected(self) -> LandingSite | None:
@@ -132,8 +152,19 @@ class SiteSelection:
         automatic selection moves on to the next site after its site was not reached."""
         with self._lock:
             self._reachable[site.name] = reachable
+            self._skipped.pop(site.name, None)
             if not reachable and not self.crew_choice and self.sites[self._current] == site:
                 self._current = (self._current + 1) % len(self.sites)
+
+    def worth_trying(self, site: LandingSite) -> bool:
+        """Whether a solve now should try ``site``: yes unless the latest evidence says it is not reachable, and then
+        every :data:`SITE_RETRY_EVERY`-th time (a call that answers no counts as a solve that skipped it)."""
+        with self._lock:
+            if self._reachable.get(site.name) is not False:
+                return True
+            skipped = self._skipped.get(site.name, 0) + 1
+            self._skipped[site.name] = 0 if skipped >= SITE_RETRY_EVERY else skipped
+            return skipped >= SITE_RETRY_EVERY
 
     def reachable_count(self) -> int:
         """Sites whose latest plan landed on them."""
@@ -149,6 +180,7 @@ class SiteSelection:
         """Drops the evidence (a reset; the automatic selection starts again at the first site)."""
         with self._lock:
             self._reachable.clear()
+            self._skipped.clear()
             self._current = 0
 
 
@@ -189,3 +221,86 @@ def site_values(
         site_margin_m=site.margin_m(touchdown) if math.isfinite(touchdown) else math.nan,
     )
     return values
+
+
+def footprint_report(
+    nearest: LandingPlan | None,
+    farthest: LandingPlan | None,
+    *,
+    state: np.ndarray,
+    stamp_ns: int,
+    solve_time_ms: float,
+    sites: SiteSelection | None,
+    reason: str = "",
+) -> StatusReport:
+    """The live footprint's status (msg_docs/helireach_reachable_footprint.md): OK with both ends verified, WARN
+    with one, ERROR with none (unknown, not "no landing": the live verdict answers that).
+
+    Args:
+        nearest, farthest: the two ends' plans (None: no answer); only a safe (replay-verified) end counts.
+        state: the state they were solved from (y, v, Ω, h, z, P).
+        stamp_ns: its stamp.
+        solve_time_ms: wall time of both ends, ms.
+        sites: the landing sites (each gets its reachability as far as the footprint tells).
+        reason: why an end has no answer.
+    """
+    here = float(state[StateIndex.DISTANCE])
+    footprint = ReachableFootprint(
+        nearest if nearest is not None and nearest.safe else None,
+        farthest if farthest is not None and farthest.safe else None,
+        (),
+    )
+    verified = (footprint.nearest is not None) + (footprint.farthest is not None)
+    status = {2: "reachable", 1: "partial", 0: "unknown"}[verified]
+    values: dict[str, Any] = {
+        "status": status,
+        "nearest_m": footprint.nearest_m,
+        "farthest_m": footprint.farthest_m,
+        "nearest_distance_m": here + footprint.nearest_m,
+        "farthest_distance_m": here + footprint.farthest_m,
+        "nearest_verified": footprint.nearest is not None,
+        "farthest_verified": footprint.farthest is not None,
+        "state_stamp_ns": stamp_ns,
+        "distance_m": here,
+        "height_m": float(state[StateIndex.HEIGHT]),
+        "forward_speed_m_s": float(state[StateIndex.FORWARD_SPEED]),
+        "solve_time_ms": solve_time_ms,
+        "reason": reason,
+    }
+    answers = []
+    for site in sites.sites if sites is not None else ():
+        start, end = site.window_from(state)
+        answer = footprint.site_reachability(start, end)
+        values[f"site_{site.name}"] = answer.value
+        answers.append(f"{site.name} {answer.value.replace('_', ' ')}")
+    if sites is not None:
+        values["sites_in_footprint"] = sum(
+            footprint.site_reachability(*site.window_from(state)) is SiteReachability.REACHABLE for site in sites.sites
+        )
+    ends = f"{footprint.nearest_m:.0f}-{footprint.farthest_m:.0f} m ahead"
+    listed = f"; sites: {', '.join(answers)}" if answers else ""
+    if verified == 2:
+        return StatusReport("OK", f"footprint: touchdown {ends} (both ends verified){listed}", values)
+    if verified == 1:
+        return StatusReport("WARN", f"footprint: one end verified ({ends}; NaN = unknown){listed}", values)
+    why = f" ({reason})" if reason else ""
+    return StatusReport("ERROR", f"footprint: UNKNOWN, no end verified{why}{listed}", values)
+
+
+def footprint_off_reason(*, period_s: float, live: bool, pool: bool, method: str) -> str:
+    """Why the planner node solves no live footprint ('' = it does): it needs a period, the live evaluations (it
+    takes their slots), a solver pool and the flyable method."""
+    if period_s <= 0.0:
+        return "footprint_period is 0"
+    if not live:
+        return "live evaluation is off (live_rate 0)"
+    if not pool:
+        return "no solver pool (solver_workers 0)"
+    if method != "flyable":
+        return f"the {method} method has no footprint (flyable only)"
+    return ""
+
+
+def footprint_off_report(reason: str) -> StatusReport:
+    """STALE: no live footprint, and why (published once, latched)."""
+    return StatusReport("STALE", f"footprint: OFF ({reason})", {"status": "off", "reason": reason})

@@ -122,6 +122,7 @@ def plan_values(plan: Any) -> dict[str, Any]:
         "iterations": plan.solver.iterations,
         "solver_status": plan.solver.status,
         "method": plan.method,
+        "headwind_m_s": plan.headwind,
         **flyability_values(plan.replay.flyability),
     }
 
@@ -316,6 +317,7 @@ def live_report(
     values = {
         **live.to_values(),
         **weight_values(configured_weight, weight),
+        "headwind_m_s": plan.headwind if plan is not None else math.nan,
         **(sites or {}),
     }
     if plan is None:

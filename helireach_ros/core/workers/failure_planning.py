@@ -16,7 +16,10 @@ what it decides to publish comes back through a :class:`PlanSink` (the node's pu
 - **the landing site**, fixed when the failure starts (the standby plan's, else the selection's): the first plan and
   every re-plan land on it when a plan for it is verified from the state, else anywhere
   (:func:`~helireach_ros.core.policies.landing_sites.solve_site_or_anywhere`): one re-plan that cannot verify the site
-  (a model error the disturbance estimate has not learnt yet) does not give it up for the rest of the descent.
+  (a model error the disturbance estimate has not learnt yet) does not give it up for the rest of the descent, and
+  after one that found it not reachable the next go straight to anywhere but every few
+  (:meth:`~helireach_ros.core.policies.landing_sites.SiteSelection.worth_trying`, shared with the live evaluations:
+  a site the last live evaluation could not reach costs the first plan no attempt).
 """
 
 from __future__ import annotations
@@ -184,11 +187,15 @@ class FailurePlanner:
         if self.backend is None:
             return None, self.not_configured
         site = self.episode_site
-        return self.backend.solve(
+        tried = site is not None and self._sites is not None and self._sites.worth_trying(site)
+        plan, error = self.backend.solve(
             state, warm_start, gross_weight=self.episode_weight.gross_weight, initial_control=initial_control,
             reaction_delay_s=reaction_delay_s, disturbance=disturbance,
-            touchdown_window=site.window_from(state) if site is not None else None,
+            touchdown_window=site.window_from(state) if site is not None and tried else None,
         )  # fmt: skip
+        if tried and plan is not None and site is not None and self._sites is not None:
+            self._sites.record(site, plan.touchdown_window is not None and plan.safe)
+        return plan, error
 
     def first_plan(self, failure: FailureEpisode, retry: bool = False) -> None:
         """The first plan of a failure (see the module docstring). ``retry``: called again because no converged plan

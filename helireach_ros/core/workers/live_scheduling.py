@@ -16,13 +16,19 @@ plan). :class:`LiveScheduler` decides when one starts and where it runs, and kee
   and is dropped;
 - with landing sites, the selected site (:class:`~helireach_ros.core.policies.landing_sites.SiteSelection`): each
   evaluation lands on it if it can, else anywhere, and records which, so that the standby plan is the selected
-  site's whenever the site is reachable.
+  site's whenever the site is reachable;
+- the live reachable footprint (``footprint_period_s``, with a solver pool): at most that often, an evaluation's slot
+  goes to the footprint's two ends instead (nearest then farthest touchdown, each one live job, warm from the latest
+  live plan), published with what they say of each site
+  (:func:`~helireach_ros.core.policies.landing_sites.footprint_report`). Its slot is a verdict not made: the standby
+  plan is at most one footprint (two solves) older.
 """
 
 from __future__ import annotations
 
 import contextlib
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -32,7 +38,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
-from helireach_ros.core.policies.landing_sites import LandingSite, SiteSelection, site_values
+from helireach_ros.core.ocp.settings import FOOTPRINT_OBJECTIVES
+from helireach_ros.core.policies.landing_sites import LandingSite, SiteSelection, footprint_report, site_values
 from helireach_ros.core.policies.live_reachability import LiveEvaluator, LiveSettings, LiveVerdict
 from helireach_ros.core.policies.plan_status import StatusReport, live_report
 from helireach_ros.core.policies.vehicle_readings import CurrentState, RotorSource
@@ -78,6 +85,8 @@ class LiveScheduler:
         prepare_standby: ``prepare_standby(plan, stamp_ns, frame)`` builds a standby verdict's messages (called off
             the lock, on the thread the verdict came back on).
         sites: the landing sites and their selection (None: land anywhere).
+        footprint_period_s: how often the live footprint is solved, s (0: never; needs a pool built with it).
+        publish_footprint: called with each footprint's status report (outside the lock).
     """
 
     def __init__(
@@ -89,9 +98,16 @@ class LiveScheduler:
         publish_verdict: Callable[[StatusReport], None],
         prepare_standby: Callable[[LandingPlan, int, str], object],
         sites: SiteSelection | None = None,
+        footprint_period_s: float = 0.0,
+        publish_footprint: Callable[[StatusReport], None] | None = None,
     ) -> None:
         self.settings = settings
         self.sites = sites
+        self._footprint_period_ns = int(footprint_period_s * 1e9) if publish_footprint is not None else 0
+        self._publish_footprint = publish_footprint
+        self._footprint_started_ns: int | None = None
+        self._latest_warm_start: AnyWarmStart = None  # the latest live plan's: a footprint end's first start
+        self._footprint_warm_starts: dict[str, AnyWarmStart] = {}  # each end's previous solution, its next start
         self.evaluator = LiveEvaluator(settings)
         self._backend = backend
         self._solver_thread = solver_thread
@@ -140,23 +156,91 @@ class LiveScheduler:
             if prepared is None:
                 return  # the state is older than live_max_state_age
             failure_now, warm_start = prepared
-            weight = self._backend.weight_now(now_ns)  # a weight no solver holds yet is built here, before any failure
-            self.latest_weight = weight
-            site = self.sites.selected() if self.sites is not None else None
-            window = site.window_from(failure_now) if site is not None else None
-            done = partial(
-                self._done, self._generation, failure_now, current.stamp_ns, current.frame, now_ns, weight, site
-            )
-            if self._backend.pool is not None:
+            if self._footprint_due(now_ns):  # this slot goes to the footprint's nearer end (the farther follows)
+                self._footprint_started_ns = now_ns
                 try:
-                    job = self._backend.submit_live(failure_now, warm_start, weight.gross_weight, window)
+                    job = self._backend.submit_footprint_end(
+                        failure_now, self._footprint_start(FOOTPRINT_OBJECTIVES[0]), FOOTPRINT_OBJECTIVES[0]
+                    )
                 except RuntimeError:  # the pool is closed: the node is being destroyed
                     return
                 self._job = job
+                done = partial(
+                    self._footprint_end, self._generation, failure_now, current.stamp_ns, time.perf_counter()
+                )
+            else:
+                weight = self._backend.weight_now(now_ns)  # a weight no solver holds is built here, before any failure
+                self.latest_weight = weight
+                site = self.sites.selected() if self.sites is not None else None
+                tried = site is not None and self.sites is not None and self.sites.worth_trying(site)
+                window = site.window_from(failure_now) if site is not None and tried else None
+                done = partial(
+                    self._done, self._generation, failure_now, current.stamp_ns, current.frame, now_ns, weight, site,
+                    tried,
+                )  # fmt: skip
+                if self._backend.pool is not None:
+                    try:
+                        job = self._backend.submit_live(failure_now, warm_start, weight.gross_weight, window)
+                    except RuntimeError:  # the pool is closed: the node is being destroyed
+                        return
+                    self._job = job
         if self._backend.pool is not None:
             job.add_done_callback(done)  # outside the lock: a job already done calls back at once, here
             return
         self._solver_thread.submit(self._solve_in_process, done, failure_now, warm_start, weight, window)
+
+    def _footprint_due(self, now_ns: int) -> bool:
+        """Whether this evaluation slot goes to the footprint (on, a pool, and its period over since the last)."""
+        if self._footprint_period_ns <= 0 or self._backend.pool is None:
+            return False
+        last = self._footprint_started_ns
+        return last is None or now_ns - last >= self._footprint_period_ns
+
+    def _footprint_start(self, objective: str) -> AnyWarmStart:
+        """A footprint end's warm start: its own previous verified solution (the state moves little between two
+        footprints; measured: warm from a site plan the nearest end took 294 iterations and did not verify), cold after
+        one that did not verify, the latest live plan's for the first."""
+        if objective in self._footprint_warm_starts:
+            return self._footprint_warm_starts[objective]
+        return self._latest_warm_start
+
+    def _footprint_end(
+        self,
+        generation: int,
+        state: np.ndarray,
+        stamp_ns: int,
+        started: float,
+        future: Future,
+        nearest: tuple[LandingPlan | None, str] | None = None,
+    ) -> None:
+        """One footprint end came back (on the pool's thread): submits the farther end after the nearer, then
+        publishes both."""
+        try:
+            plan, error = future.result(), ""
+        except Exception as exception:  # a refused state, a dead or hung worker, a closed pool: no answer
+            plan, error = None, f"{type(exception).__name__}: {exception}"
+        with contextlib.suppress(Exception):  # the node may be shutting down
+            with self._lock:
+                if generation != self._generation:
+                    return  # a failure started (or a reset) meanwhile
+                objective = FOOTPRINT_OBJECTIVES[0 if nearest is None else 1]
+                # a verified end starts the next from its solution; one that is not starts the next cold
+                self._footprint_warm_starts[objective] = plan.warm_start if plan is not None and plan.safe else None
+                if nearest is None:
+                    farthest = FOOTPRINT_OBJECTIVES[1]
+                    job = self._backend.submit_footprint_end(state, self._footprint_start(farthest), farthest)
+                    self._job = job
+            if nearest is None:
+                job.add_done_callback(
+                    partial(self._footprint_end, generation, state, stamp_ns, started, nearest=(plan, error))
+                )
+                return
+            report = footprint_report(
+                nearest[0], plan, state=state, stamp_ns=stamp_ns, solve_time_ms=1e3 * (time.perf_counter() - started),
+                sites=self.sites, reason="; ".join(reason for reason in (nearest[1], error) if reason),
+            )  # fmt: skip
+            assert self._publish_footprint is not None  # footprints are solved only with a publisher
+            self._publish_footprint(report)
 
     def _solve_in_process(
         self,
@@ -183,6 +267,7 @@ class LiveScheduler:
         started_ns: int,
         weight: WeightChoice,
         site: LandingSite | None,
+        site_tried: bool,
         future: Future,
     ) -> None:
         """Records a finished evaluation and publishes its verdict (on the pool's or the solver thread)."""
@@ -195,11 +280,13 @@ class LiveScheduler:
                 if generation != self._generation:
                     return  # a failure started (or the evaluator was reset) meanwhile: not evidence any more
                 verdict = self.evaluator.record(state, stamp_ns, started_ns, self._clock_ns(), plan, error)
+                if plan is not None and plan.solver.success:
+                    self._latest_warm_start = plan.warm_start
                 standby = self.evaluator.standby_verdict is verdict
                 if standby:
                     self._standby_frame, self._standby_weight, self._standby_site = frame, weight, site
                 sites = self.sites
-                if sites is not None and site is not None and plan is not None and plan.solver.success:
+                if sites is not None and site is not None and site_tried and plan is not None:
                     sites.record(site, plan.touchdown_window is not None and plan.safe)
                 report = live_report(
                     verdict,

@@ -64,6 +64,8 @@ class BackendSettings:
         robust_uncertainty: the uncertainty set of that verification ('' = config/uncertainty.yaml).
         site_planning: plans may be asked to land on a site (a touchdown window): the site NLP is built at start-up
             too (needs the ``flyable`` method).
+        footprint: the live reachable footprint: the workers build its two NLPs at start-up (needs the ``flyable``
+            method and a solver pool).
     """
 
     envelope_file: str = ""
@@ -78,6 +80,7 @@ class BackendSettings:
     robust_policy: ClosedLoopSettings | None = None
     robust_uncertainty: str = ""
     site_planning: bool = False
+    footprint: bool = False
 
 
 class PlannerBackend:
@@ -105,8 +108,8 @@ class PlannerBackend:
         from helireach_ros.core.planning.planner import get_planner
 
         started = time.perf_counter()
-        if backend.site_planning and settings.method != "flyable":
-            raise ValueError(f"landing sites need the flyable method, not {settings.method!r}")
+        if (backend.site_planning or backend.footprint) and settings.method != "flyable":
+            raise ValueError(f"landing sites and the footprint need the flyable method, not {settings.method!r}")
         self.airframe = airframe
         self.settings = settings
         self.backend = backend
@@ -129,6 +132,7 @@ class PlannerBackend:
                     warm_up=backend.warm_up,
                     default_timeout_s=backend.solve_timeout_s,
                     site_planning=backend.site_planning,
+                    footprint=backend.footprint,
                 ),
             )
             self.planner: Any = self.pool
@@ -339,6 +343,22 @@ class PlannerBackend:
         return self.pool.submit(
             state, warm_start, priority=PRIORITY_LIVE, timeout_s=timeout_s, cold_check=True,
             reaction_delay_s=self.reaction_delay_s, gross_weight=gross_weight, touchdown_window=touchdown_window,
+        )  # fmt: skip
+
+    def submit_footprint_end(self, state: np.ndarray, warm_start: Any, objective: str) -> Future:
+        """One end of the live reachable footprint in the pool (live priority, 4 × solve_timeout), for the airframe's
+        weight (the NLPs built at start-up), with the node's reaction delay.
+
+        Raises:
+            RuntimeError: no pool, or it is closed.
+            ValueError: the pool was not built with the footprint, or ``objective`` is not an end's.
+        """
+        if self.pool is None:
+            raise RuntimeError("the live footprint is solved in the pool only")
+        timeout_s = _LIVE_TIMEOUT_FACTOR * self.backend.solve_timeout_s
+        return self.pool.submit(
+            state, warm_start, priority=PRIORITY_LIVE, timeout_s=timeout_s, reaction_delay_s=self.reaction_delay_s,
+            objective=objective,
         )  # fmt: skip
 
     def solve_live(

@@ -54,7 +54,7 @@ import numpy as np
 from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.array_codec import decode_dataclass, encode_dataclass
-from helireach_ros.core.ocp.settings import PlannerSettings
+from helireach_ros.core.ocp.settings import FOOTPRINT_OBJECTIVES, PlannerSettings
 from helireach_ros.core.planning.planner import ControlFunctionWarmStart, LandingPlan, WarmStart
 
 __all__ = [
@@ -101,6 +101,8 @@ class SolverPoolSettings:
             sized for a solve).
         site_planning: each worker also builds (and warms up) the landing-site NLP of every weight it holds, so that
             a job with a touchdown window builds nothing (the settings' method must be ``flyable``).
+        footprint: each worker also builds (and warms up) the reachable footprint's two NLPs (nearest and farthest
+            touchdown) of the airframe's weight, so that a footprint job builds nothing (``flyable`` too).
     """
 
     workers: int = 2
@@ -109,6 +111,7 @@ class SolverPoolSettings:
     default_timeout_s: float = 5.0
     build_timeout_s: float = 120.0
     site_planning: bool = False
+    footprint: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.workers, int) or self.workers < 1:
@@ -132,6 +135,7 @@ class _SolveRequest:
     disturbance: np.ndarray | None = None  # (d_y, d_v, d_Ω); None = the model as it is
     stored_controls: ControlFunctionWarmStart | None = None  # a stored plan to warm-start from (not warm_start)
     touchdown_window: np.ndarray | None = None  # (start, end) m from the state: land on this site, else anywhere
+    objective: str = ""  # a footprint end's objective ('' = the settings', or the site's with a touchdown window)
 
     @property
     def start(self) -> WarmStart | ControlFunctionWarmStart | None:
@@ -151,27 +155,29 @@ def _worker_main(
     warm_up: bool,
     gross_weights: tuple[float, ...] = (),
     site_planning: bool = False,
+    footprint: bool = False,
 ) -> None:
     """A worker: builds the NLP (and one for each of ``gross_weights``, N; with ``site_planning`` the landing-site NLP
-    of each too), warms them up, then answers requests until told to stop or the pipe closes."""
+    of each too; with ``footprint`` the footprint ends' NLPs of the airframe's weight), warms them up, then answers
+    requests until told to stop or the pipe closes."""
     from helireach_ros.core.aircraft.model import initial_state_after_failure
     from helireach_ros.core.planning.planner import get_planner
     from helireach_ros.core.policies.landing_sites import solve_site_or_anywhere
     from helireach_ros.core.policies.live_reachability import solve_with_cold_check
 
-    site_settings = settings.replace(objective="site") if site_planning else settings
-    held: dict[tuple[float, bool], None] = {}  # the recent (weight, site) NLPs, oldest first: in get_planner's cache
+    held: dict[tuple[float, str], None] = {}  # the recent (weight, objective) NLPs, oldest first: get_planner's cache
 
-    def planner_for(gross_weight: float, site: bool = False, announce: bool = False) -> Any:
-        """The NLP of a weight (NaN: the airframe's), for a site or not: built at its first request, then cached."""
+    def planner_for(gross_weight: float, objective: str = "", announce: bool = False) -> Any:
+        """The NLP of a weight (NaN: the airframe's) and an objective ('' = the settings'): built at its first
+        request, then cached."""
         weight = airframe.gross_weight if math.isnan(gross_weight) else gross_weight
-        building = (weight, site) not in held
+        building = (weight, objective) not in held
         if building and announce:
             connection.send_bytes(_BUILDING)
         model = airframe if weight == airframe.gross_weight else airframe.with_conditions(gross_weight=weight)
-        built = get_planner(model, site_settings if site else settings)
-        held.pop((weight, site), None)
-        held[(weight, site)] = None
+        built = get_planner(model, settings.replace(objective=objective) if objective else settings)
+        held.pop((weight, objective), None)
+        held[(weight, objective)] = None
         while len(held) > 2 * (_HELD_WEIGHTS + 1):
             held.pop(next(iter(held)))
         if building and announce:
@@ -184,10 +190,15 @@ def _worker_main(
         if warm_up:
             plan = built.plan(warm_up_state)
         if site_planning:
-            site_built = planner_for(gross_weight, site=True)
+            site_built = planner_for(gross_weight, "site")
             if warm_up:  # a site around the touchdown-cost plan's touchdown
                 distance = float(plan.replay.touchdown_state[StateIndex.DISTANCE] - warm_up_state.distance)
                 site_built.plan(warm_up_state, touchdown_window=(distance - 30.0, distance + 30.0))
+        if footprint and math.isnan(gross_weight):
+            for objective in FOOTPRINT_OBJECTIVES:
+                end = planner_for(gross_weight, objective)
+                if warm_up:
+                    end.plan(warm_up_state, plan.warm_start)
     connection.send_bytes(_READY)
     while True:
         try:
@@ -203,7 +214,7 @@ def _worker_main(
                 "reaction_delay_s": request.reaction_delay_s,
                 "disturbance": request.disturbance,
             }
-            anywhere_planner = planner_for(request.gross_weight, announce=True)
+            anywhere_planner = planner_for(request.gross_weight, request.objective, announce=True)
             solve: Callable[[np.ndarray, Any], LandingPlan] = functools.partial(
                 _carried_solve, anywhere_planner, **common
             )
@@ -211,7 +222,7 @@ def _worker_main(
                 solve = functools.partial(solve_with_cold_check, solve)
             if request.touchdown_window is not None:
                 window = (float(request.touchdown_window[0]), float(request.touchdown_window[1]))
-                site_planner = planner_for(request.gross_weight, site=True, announce=True)
+                site_planner = planner_for(request.gross_weight, "site", announce=True)
                 on_site: Callable[[np.ndarray, Any], LandingPlan] = functools.partial(
                     _carried_solve, site_planner, touchdown_window=window, **common
                 )
@@ -257,12 +268,13 @@ class _Worker:
         warm_up: bool,
         gross_weights: tuple[float, ...] = (),
         site_planning: bool = False,
+        footprint: bool = False,
     ) -> None:
         self.connection, child = context.Pipe(duplex=True)
         extra = tuple(weight for weight in gross_weights if weight != airframe.gross_weight)[-_HELD_WEIGHTS:]
         self.process = context.Process(
             target=_worker_main,
-            args=(child, airframe, settings, warm_up, extra, site_planning),
+            args=(child, airframe, settings, warm_up, extra, site_planning, footprint),
             name="helireach_solver",
             daemon=True,
         )
@@ -349,13 +361,15 @@ class SolverPool:
         gross_weight: float | None = None,
         disturbance: np.ndarray | None = None,
         touchdown_window: tuple[float, float] | None = None,
+        objective: str = "",
     ) -> Future:
         """Queues a solve; the future gives the :class:`~helireach_ros.core.planning.planner.LandingPlan`.
 
         ``touchdown_window`` (start, end; m of touchdown distance from ``state``): land on that site, or anywhere if no
         site plan is safe (:func:`~helireach_ros.core.policies.landing_sites.solve_site_or_anywhere`; the plan's own
         ``touchdown_window`` says which it is). Needs :attr:`SolverPoolSettings.site_planning`, so no NLP is built
-        for it in a job.
+        for it in a job. ``objective``: a footprint end's (``nearest_touchdown``, ``farthest_touchdown``; needs
+        :attr:`SolverPoolSettings.footprint`), '' for the settings'.
 
         ``initial_control``, ``reaction_delay_s`` and ``disturbance`` are passed to
         :meth:`~helireach_ros.core.planning.planner.LandingPlanner.plan` (None: its defaults). ``gross_weight`` (N, None
@@ -375,10 +389,14 @@ class SolverPool:
         solver_warm_start = None if isinstance(warm_start, ControlFunctionWarmStart) else warm_start
         if touchdown_window is not None and not self.pool_settings.site_planning:
             raise ValueError("a touchdown window needs a pool built with site_planning")
+        if objective and (objective not in FOOTPRINT_OBJECTIVES or not self.pool_settings.footprint):
+            raise ValueError(f"objective {objective!r}: only a footprint end's, in a pool built with footprint")
+        if objective and touchdown_window is not None:
+            raise ValueError("a footprint end has no touchdown window")
         window = None if touchdown_window is None else np.asarray(touchdown_window, dtype=float).reshape(2)
         request = _SolveRequest(
             np.asarray(state, dtype=float).reshape(-1), solver_warm_start, cold_check, control, delay, weight,
-            disturbance, stored, window,
+            disturbance, stored, window, objective,
         )  # fmt: skip
         payload = encode_dataclass(request)
         job = _Job(payload, future, timeout_s or self.pool_settings.default_timeout_s, priority, gross_weight=weight)
@@ -472,6 +490,7 @@ class SolverPool:
             self.pool_settings.warm_up,
             gross_weights,
             self.pool_settings.site_planning,
+            self.pool_settings.footprint,
         )
 
     def _wake(self) -> None:

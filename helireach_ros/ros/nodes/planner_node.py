@@ -28,7 +28,7 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
 from helireach_ros.core.planning.fallback import FallbackPlan
 from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
-from helireach_ros.core.policies.landing_sites import SiteSelection
+from helireach_ros.core.policies.landing_sites import SiteSelection, footprint_off_reason, footprint_off_report
 from helireach_ros.core.policies.landing_supervisor import EpisodeAction, LandingSupervisor, TimerAction
 from helireach_ros.core.policies.plan_status import (
     PlannerIdentity,
@@ -84,6 +84,7 @@ class LandingPlannerNode(Node):
         self._backend: PlannerBackend | None = None  # None = not configured (a broken airframe or settings file)
         self.readings: LatestReadings | None = None
         self.sites = self._site_selection()
+        self.footprint_off = "planner not configured"
         setup_error = ""
         try:
             from helireach_ros.core.ocp.settings import load_settings
@@ -105,6 +106,7 @@ class LandingPlannerNode(Node):
         self._status_publisher = latched(DiagnosticStatus, rm.TOPIC_PLAN_STATUS)
         self._robust_publisher = latched(DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT)
         self._live_publisher = latched(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
+        self._footprint_publisher = latched(DiagnosticStatus, rm.TOPIC_REACHABLE_FOOTPRINT)
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
@@ -115,7 +117,11 @@ class LandingPlannerNode(Node):
                 live_settings, self._backend, self.solver_thread, self._now_ns,
                 partial(self._publish, self._live_publisher, "live reachability"),
                 lambda plan, stamp_ns, frame: plan_messages(plan, stamp_ns, frame, config.world_frame), self.sites,
+                config.footprint_period if not self.footprint_off else 0.0,
+                partial(self._publish, self._footprint_publisher, "reachable footprint"),
             )  # fmt: skip
+        if self.footprint_off:  # the latched topic says why there is none (never a silent absence)
+            self._publish(self._footprint_publisher, "reachable footprint", footprint_off_report(self.footprint_off))
         # Inputs through a QosWatch: an incompatible publisher is an ERROR "<node>: QoS" on /diagnostics. The
         # failure event stays RELIABLE (one message per failure must not be lost; a best-effort one is reported).
         self._qos_watch = QosWatch(self, config.diagnostics_period)
@@ -160,7 +166,15 @@ class LandingPlannerNode(Node):
         if self.sites is not None and settings.method != "flyable":
             logger.error(f"landing sites need the flyable method, not {settings.method!r}: landing anywhere")
             self.sites = None
-        backend_settings = self.config.backend_settings(site_planning=self.sites is not None)
+        self.footprint_off = footprint_off_reason(
+            period_s=self.config.footprint_period,
+            live=self.config.live_rate > 0.0,
+            pool=self.config.solver_workers > 0,
+            method=settings.method,
+        )
+        backend_settings = self.config.backend_settings(
+            site_planning=self.sites is not None, footprint=not self.footprint_off
+        )
         backend = PlannerBackend(airframe, settings, backend_settings, lambda level, text: report[level](text))
         self._backend = backend
         where = f"{backend_settings.solver_workers} solver workers" if backend.pool else "solving in this process"

@@ -89,6 +89,11 @@ class PlannerParameters:
         "", "landing sites along the track (odometry x, m): 'name:start_m:end_m' separated by ';' ('' = land anywhere)"
     )
     selected_site: str = parameter("", "the crew's landing site, by name ('' = automatic: the first reachable one)")
+    footprint_period: float = parameter(
+        0.0,
+        "live reachable footprint at most this often, s (0 = off; each takes a live evaluation's slot)",
+        (0.0, 3600.0),
+    )
 
     # -- the core's settings, from these parameters ----------------------------------------------------------------
     @property
@@ -146,8 +151,8 @@ class PlannerParameters:
             return None
         return SiteSelection(parse_landing_sites(entries), self.selected_site)
 
-    def backend_settings(self, *, site_planning: bool = False) -> BackendSettings:
-        """How the node solves (``site_planning``: with usable landing sites)."""
+    def backend_settings(self, *, site_planning: bool = False, footprint: bool = False) -> BackendSettings:
+        """How the node solves (``site_planning``: with usable landing sites; ``footprint``: the live footprint)."""
         return BackendSettings(
             envelope_file=self.envelope_file,
             solver_workers=self.solver_workers,
@@ -161,4 +166,5 @@ class PlannerParameters:
             robust_policy=self.replanning_policy() if self.robust_verification else None,
             robust_uncertainty=self.robust_uncertainty,
             site_planning=site_planning,
+            footprint=footprint,
         )

@@ -29,6 +29,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Bool
 from trajectory_msgs.msg import JointTrajectory
 
+from helireach_ros.core.aircraft.airframe import load_airframe
 from helireach_ros.core.flight.mismatch_presets import MISMATCH_PRESET_NAMES, apply_mismatch_preset
 from helireach_ros.core.flight.simulation import ControlSchedule, SimulatedVehicle, TouchdownReport, load_scenario
 from helireach_ros.core.status_contracts import TouchdownValues
@@ -94,6 +95,9 @@ class SimVehicleParameters:
     rotor_joint: str = parameter(rm.ROTOR_JOINT, "rotor joint name")
     publish_engine_power: bool = parameter(True, "publish engine torque as the rotor effort")
     diagnostics_period: float = parameter(1.0, "period of /diagnostics, s", (0.05, 60.0))
+    headwind: float = parameter(
+        0.0, "steady wind along the track the vehicle flies in, m/s, positive against the flight", (-30.0, 30.0)
+    )
 
 
 class SimVehicleNode(Node):
@@ -126,7 +130,8 @@ class SimVehicleNode(Node):
                 self.scenario = apply_mismatch_preset(self.scenario, mismatch)
             except ValueError as error:
                 raise ParameterError(f"parameter 'mismatch' of {self.get_name()}: {error}") from None
-        self.vehicle = SimulatedVehicle(self.scenario)
+        airframe = load_airframe(self.scenario.airframe).with_conditions(headwind=config.headwind)
+        self.vehicle = SimulatedVehicle(self.scenario, airframe)
         self._lock = threading.Lock()
         self._start_ns: int | None = None
         self._trajectories = 0

@@ -142,7 +142,7 @@ class Transcription(ABC):
             "ipopt.sb": "yes",
             "print_time": False,
             "ipopt.tol": settings.tolerance,
-            "ipopt.max_iter": settings.max_iterations,
+            "ipopt.max_iter": settings.iteration_limit,
             "ipopt.acceptable_tol": 1e-5,
             "ipopt.acceptable_iter": 5,
             "ipopt.mu_strategy": "adaptive",

@@ -168,6 +168,9 @@ class FlyableTranscription(VerifiedTranscription):
         state_low, state_high = self.scaled_state_bounds(self.n_states, self.state_rows)
         touchdown_height = self.state_index(self.n_states - 1, 3)
         state_low[touchdown_height] = state_high[touchdown_height] = 0.0  # h(T) = 0: the plan ends on the ground
+        if airframe.headwind:  # a contact, not a graze (PlannerSettings.wind_touchdown_min_descent_rate)
+            touchdown_descent = self.state_index(self.n_states - 1, StateIndex.DESCENT_RATE)
+            state_low[touchdown_descent] = settings.wind_touchdown_min_descent_rate / self.state_scale[0]
         # The upper rotor back-off starts after the first interval, as the lower one ramps in: a re-plan from a
         # rotor between the NLP's line and the true limit (a flare speeds it up) must bring it inside, and may.
         first_interval = [self.state_index(point, 2) for point in range(settings.degree)]  # Ω in interval 1
