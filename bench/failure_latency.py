@@ -26,7 +26,12 @@ from the state at the failure follows; both are timed. The state and the false f
 schedule, as a vehicle streams them (not after every ``spin_once``, which flooded the queues), and a failure
 without any trajectory within 10 s is counted and reported, not fatal. ``--baseline`` also runs, in the same
 run, ``solver_workers:=0 live_rate:=0`` (the legacy configuration: solves on the node's thread, no
-standby) and prints the ratio of its failure → first trajectory p50/p95 to the defaults'. Prints the command
+standby) and prints the ratio of its failure → first trajectory p50/p95 to the defaults'. ``--site START:END``
+also runs, in the same run, the defaults with one landing site ``START``–``END`` m ahead of every failure state
+(the bench's odometry stays at distance 0; planner parameter ``landing_sites``): the live evaluations then aim at
+the site, so a standby plan is the site's when the site is reachable, and the refined plan lands on it or, not
+reachable, anywhere; it prints how many first and refined plans were made for the site and the ratio of its
+latencies to the defaults'. Prints the command
 line and what it measured on this machine, with the load average; ``--json`` also writes it to
 docs/results/data/failure_latency.json.
 """
@@ -154,6 +159,7 @@ class Vehicle:
             if not statuses:
                 continue
             first = statuses[0]
+            for_site = [values.get("site_planned") == "true" for values in statuses]
             kind = "standby" if first.get("standby") == "true" else "fallback" if first["fallback"] == "true" else ""
             refined = [
                 k
@@ -175,14 +181,22 @@ class Vehicle:
                     "kind": kind or "refined",
                     "refined": 1e3 * (mine[refined[0]] - started),
                     "first_in_planner": float(first["latency_ms"]),
+                    "first_for_site": for_site[0],
+                    "refined_for_site": for_site[refined[0]],
                 }
             if kind != "standby" and time.perf_counter() > started + _NO_CONVERGENCE_S:
                 first_ms, in_planner = 1e3 * (mine[0] - started), float(first["latency_ms"])
-                return {"first": first_ms, "kind": kind, "refined": math.nan, "first_in_planner": in_planner}
+                return {
+                    "first": first_ms, "kind": kind, "refined": math.nan, "first_in_planner": in_planner,
+                    "first_for_site": for_site[0], "refined_for_site": False,
+                }  # fmt: skip
         # Counted, not fatal: the run goes on, and the report says how many (a trajectory that never arrived).
         self.lost += 1
         self.node.get_logger().error(f"no landing trajectory within {_TIMEOUT_S} s ({len(self.arrivals)} arrived)")
-        return {"first": math.nan, "kind": "none", "refined": math.nan, "first_in_planner": math.nan}
+        return {
+            "first": math.nan, "kind": "none", "refined": math.nan, "first_in_planner": math.nan,
+            "first_for_site": False, "refined_for_site": False,
+        }  # fmt: skip
 
 
 def _states(count: int, seed: int) -> list[tuple[float, float]]:
@@ -195,7 +209,9 @@ def _run(vehicle: Vehicle, states: list[tuple[float, float]]) -> dict[str, list]
     vehicle.fail(states[0])  # not counted: discovery of the reverse path and first-call costs
     vehicle.details.clear()
     vehicle.stale = vehicle.lost = 0
-    results: dict[str, list] = {"first": [], "kind": [], "refined": [], "first_in_planner": []}
+    results: dict[str, list] = {
+        "first": [], "kind": [], "refined": [], "first_in_planner": [], "first_for_site": [], "refined_for_site": [],
+    }  # fmt: skip
     for state in states:
         for key, value in vehicle.fail(state).items():
             results[key].append(value)
@@ -284,6 +300,17 @@ def _report(name: str, results: dict[str, list]) -> dict:
     print(f"  first trajectory was: {counts} (no standby: no safe live verdict at that state, or none yet)")
     print(f"  planned from the previous failure's state (state not yet received): {results['stale'][0]}")
     print(f"  no trajectory received within {_TIMEOUT_S:g} s: {results['lost'][0]}")
+    if any(results["first_for_site"]) or any(results["refined_for_site"]):
+        standby_for_site = sum(
+            site and kind == "standby" for site, kind in zip(results["first_for_site"], kinds, strict=True)
+        )
+        numbers.update(
+            standby_for_site=standby_for_site, refined_for_site=sum(results["refined_for_site"])
+        )  # fmt: skip
+        print(
+            f"  made for the landing site: {standby_for_site} standby plans, {sum(results['refined_for_site'])} "
+            f"refined plans (the others landed anywhere: the site not reachable from that state)"
+        )
     if not results["details"]:
         return numbers
     solve, planner, iterations = (summary(column) for column in zip(*results["details"], strict=True))
@@ -303,6 +330,9 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--executor", choices=EXECUTOR_KINDS, default=DEFAULT_EXECUTOR, help="the system's executor")
     parser.add_argument("--baseline", action="store_true", help="also run solver_workers:=0 live_rate:=0 (legacy)")
+    parser.add_argument(
+        "--site", default=None, metavar="START:END", help="also run with a landing site START-END m ahead of each state"
+    )
     add_json_argument(parser)
     arguments = parser.parse_args()
     record = Record.start()
@@ -319,6 +349,10 @@ def main() -> None:
     configurations = [("solver workers + live evaluation (defaults)", [])]
     if arguments.baseline:
         configurations.append(("baseline: solver_workers:=0 live_rate:=0", _BASELINE))
+    if arguments.site:
+        start, end = (float(part) for part in arguments.site.split(":"))
+        site = ["-p", f"helireach_planner:landing_sites:=bench:{start:g}:{end:g}"]
+        configurations.append((f"defaults + landing site {start:g}-{end:g} m ahead", site))
     runners = []
     if arguments.mode in ("both", "composed"):
         runners.append((f"composed (one process, {arguments.executor} executor)", run_composed))
@@ -328,20 +362,24 @@ def main() -> None:
         )
     with tempfile.TemporaryDirectory() as log_dir:
         for runner_name, runner in runners:
-            first = []
+            runs = []
             for configuration_name, extra in configurations:
                 results = runner(states, log_dir, arguments.executor, extra)
                 run = _report(f"{runner_name}, {configuration_name}", results)
                 numbers["runs"].append({"system": runner_name, "configuration": configuration_name, **run})
-                first.append(run["first"])
-            if len(first) == 2 and all(stats["n"] for stats in first):
-                defaults, baseline = first
-                ratios = {key: baseline[key] / defaults[key] for key in ("median", "p95")}
-                numbers["baseline_ratios"][runner_name] = ratios
-                print(
-                    f"  failure -> first trajectory, baseline / defaults (same run): p50 {ratios['median']:.2f}x, "
-                    f"p95 {ratios['p95']:.2f}x; load average now {loadavg_text()}"
-                )
+                runs.append(run)
+            for (configuration_name, _), run in list(zip(configurations, runs, strict=True))[1:]:
+                for key, label in (("first", "first trajectory"), ("refined", "refined plan")):
+                    stats, defaults = run[key], runs[0][key]
+                    if not (stats["n"] and defaults["n"]):
+                        continue
+                    ratios = {quantile: stats[quantile] / defaults[quantile] for quantile in ("median", "p95")}
+                    if configuration_name.startswith("baseline") and key == "first":
+                        numbers["baseline_ratios"][runner_name] = ratios
+                    print(
+                        f"  failure -> {label}, {configuration_name.split(':')[0]} / defaults (same run): p50 "
+                        f"{ratios['median']:.2f}x, p95 {ratios['p95']:.2f}x; load average now {loadavg_text()}"
+                    )
     print(f"\nstates: {Path(__file__).name} --seed {arguments.seed}: {numbers['states']}")
     if arguments.json:
         record.write(numbers)

@@ -280,3 +280,47 @@ def test_live_evaluation_runs_on_the_solver_thread_and_hands_the_failure_its_sta
     assert live.pause(stamp_ns + 10 * 1_000_000_000) is None  # a failure long after: too old to stand by
     live.pause()  # the episode ended: every verdict forgotten
     assert live.evaluator.latest is None and live.pause(stamp_ns + 100_000_000) is None
+
+
+def test_without_a_standby_on_the_site_the_first_plan_lands_anywhere_then_the_sites_plan_follows() -> None:
+    """The deadline is met by the compiled anywhere NLP; the site's plan from the same state replaces it when verified;
+    a site found unreachable is not tried by the next re-plans but every few."""
+    from helireach_ros.core.policies.landing_sites import SITE_RETRY_EVERY, SiteSelection, parse_landing_sites
+
+    airframe, settings = load_airframe("uh60a_class"), load_settings()
+    backend = PlannerBackend(
+        airframe, settings, BackendSettings(solver_workers=0, warm_up=False, site_planning=True), lambda *report: None
+    )
+    clock = Clock()
+    supervisor = LandingSupervisor(SupervisorSettings(deadline=0.25))
+    readings = LatestReadings(airframe, MAX_AGE_NS, "base_link")
+    sink = RecordingSink(supervisor, clock)
+    sites = SiteSelection(parse_landing_sites(["beyond:740:800", "far:5000:5100"]), "beyond")
+    planner = FailurePlanner(
+        backend, "", supervisor, readings, sink, clock, zero_power=True, disturbance=None, sites=sites
+    )  # fmt: skip
+    _feed(readings, clock, HEIGHT, SPEED)  # along-track distance 0: the site is 740-800 m ahead (anywhere: ~720 m)
+    failure = supervisor.start_failure(clock(), clock())
+    assert failure is not None
+    planner.fix_weight(None)
+    planner.fix_site(None)  # no standby plan
+    planner.first_plan(failure)
+    assert [plan.touchdown_window is not None for plan, *_ in sink.plans] == [False, True]
+    anywhere, on_site = sink.plans[0][0], sink.plans[1][0]
+    assert anywhere.safe and on_site.safe and sites.reachability(sites.sites[0]) is True
+    assert planner.site_values(on_site)["on_site"] is True
+    # the crew's far site: not reachable, the first plan lands anywhere and the site's attempt is not published
+    crew_far = SiteSelection(sites.sites, "far")
+    planner = FailurePlanner(
+        backend, "", supervisor, readings, sink, clock, zero_power=True, disturbance=None, sites=crew_far
+    )  # fmt: skip
+    clock.advance(1.0)
+    _feed(readings, clock, HEIGHT, SPEED)
+    failure = supervisor.start_failure(clock(), clock())
+    assert failure is not None
+    planner.fix_site(None)
+    published = len(sink.plans)
+    planner.first_plan(failure)
+    assert len(sink.plans) == published + 1 and sink.plans[-1][0].touchdown_window is None
+    assert crew_far.reachability(crew_far.sites[1]) is False
+    assert [crew_far.worth_trying(crew_far.sites[1]) for _ in range(SITE_RETRY_EVERY)][-1]  # every fifth solve

@@ -244,3 +244,15 @@ def test_the_live_footprint_takes_evaluation_slots_and_says_what_it_knows_of_eac
         assert report.level == ("OK" if values["nearest_verified"] else "WARN")
     assert all(report.values["landing_site"] == "ahead" for report in verdicts)
     assert any(report.values["on_site"] for report in verdicts)
+
+
+def test_without_a_safe_landing_the_best_effort_is_a_converged_plan_not_a_failed_attempt(airframe, settings) -> None:
+    """150 ft in hover is in the H-V avoid region: no plan is safe, and a site far ahead cannot be reached; the node
+    must still get the converged best effort (a failed solve would make it publish a fallback)."""
+    state = initial_state_after_failure(airframe, 150 * FT, 0.0).as_array()
+    site = LandingSite("far", 3000.0, 3100.0)
+    solve_site, solve_anywhere = _solvers(airframe, settings, site, state)
+    plan = solve_site_or_anywhere(solve_site, solve_anywhere, state, None)
+    assert not plan.safe and plan.solver.success
+    attempts = [solve_site(state, None), solve_anywhere(state, None)]
+    assert plan.value == pytest.approx(min(p.value for p in attempts if p.solver.success))

@@ -35,6 +35,7 @@ import numpy as np
 
 from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.planning.footprint import ReachableFootprint, SiteReachability
+from helireach_ros.core.policies.live_reachability import solve_with_cold_check
 from helireach_ros.core.policies.plan_status import StatusReport
 
 if TYPE_CHECKING:
@@ -48,6 +49,7 @@ __all__ = [
     "footprint_off_report",
     "footprint_report",
     "parse_landing_sites",
+    "plan_site_or_anywhere",
     "site_values",
     "solve_site_or_anywhere",
 ]
@@ -190,14 +192,56 @@ def solve_site_or_anywhere(
     state: np.ndarray,
     warm_start: Any,
 ) -> LandingPlan:
-    """The landing on the site if one is verified, else the landing anywhere if that is safe, else the site's
-    attempt (its status says why). Each ``solve(state, warm_start)`` is one planner's (site, and touchdown-cost),
-    with any cold check of its own; the anywhere solve is cold (the site's warm point pins it to the site)."""
+    """The landing on the site if one is verified, else the landing anywhere if that is safe, else the best effort:
+    of the two plans that converged, the one with the lower value (a failed site attempt must not hide a converged
+    plan anywhere: the node would publish a fallback instead), the site's attempt if neither did. Each
+    ``solve(state, warm_start)`` is one planner's (site, and touchdown-cost), with any cold check of its own; the
+    anywhere solve is cold (the site's warm point pins it to the site)."""
     on_site = solve_site(state, warm_start)
     if on_site.safe:
         return on_site
     anywhere = solve_anywhere(state, None)
-    return anywhere if anywhere.safe else on_site
+    if anywhere.safe:
+        return anywhere
+    converged = [plan for plan in (on_site, anywhere) if plan.solver.success and not math.isnan(plan.value)]
+    return min(converged, key=lambda plan: plan.value) if converged else on_site
+
+
+def plan_site_or_anywhere(
+    anywhere_planner: Any,
+    site_planner: Any | None,
+    state: np.ndarray,
+    warm_start: Any,
+    window: tuple[float, float] | None,
+    *,
+    cold_check: bool,
+    **request: Any,
+) -> LandingPlan:
+    """One solve as the planner node makes it, in a worker or in its own process: on the site (``window``, m from
+    the state) if a plan for it is verified, else anywhere (:func:`solve_site_or_anywhere`); without a window,
+    anywhere. Warm starts cross between the two NLPs (``carried_warm_start``); ``request`` goes to every ``plan``.
+
+    ``cold_check`` (live evaluations) applies to the anywhere solve only: the verdict must not call a state unsafe
+    that a cold start would land, but a site missed by a warm start is only a landing elsewhere, tried again by a
+    later solve, while a cold re-solve of a site beyond reach costs its whole iteration limit a second time.
+    """
+
+    def solver(planner: Any, **extra: Any) -> Callable[[np.ndarray, Any], LandingPlan]:
+        def solve(at: np.ndarray, warm: Any) -> LandingPlan:
+            return planner.plan(at, planner.carried_warm_start(warm), **request, **extra)
+
+        return solve
+
+    anywhere = solver(anywhere_planner)
+    if cold_check:
+        plain = anywhere
+
+        def anywhere(at: np.ndarray, warm: Any) -> LandingPlan:
+            return solve_with_cold_check(plain, at, warm)
+
+    if window is None or site_planner is None:
+        return anywhere(state, warm_start)
+    return solve_site_or_anywhere(solver(site_planner, touchdown_window=window), anywhere, state, warm_start)
 
 
 def site_values(

@@ -13,13 +13,18 @@ what it decides to publish comes back through a :class:`PlanSink` (the node's pu
   continuous), with no reaction delay, for the model plus what the last interval taught of its error
   (:class:`~helireach_ros.core.estimation.disturbance.DisturbanceTracker`); a failed re-plan keeps the current plan;
 - **the deadline's fallback** when no plan is out in time (:func:`~helireach_ros.core.planning.fallback.fallback_plan`);
-- **the landing site**, fixed when the failure starts (the standby plan's, else the selection's): the first plan and
-  every re-plan land on it when a plan for it is verified from the state, else anywhere
+- **the landing site**, fixed when the failure starts (the standby plan's, else the selection's). Without a standby
+  plan on the site, the first plan lands anywhere (the site NLP is slower: the deadline is met by the compiled one)
+  and the site's plan from the same state follows it when verified. Every re-plan lands on the site when a plan for
+  it is verified from the state, else anywhere
   (:func:`~helireach_ros.core.policies.landing_sites.solve_site_or_anywhere`): one re-plan that cannot verify the site
-  (a model error the disturbance estimate has not learnt yet) does not give it up for the rest of the descent, and
-  after one that found it not reachable the next go straight to anywhere but every few
-  (:meth:`~helireach_ros.core.policies.landing_sites.SiteSelection.worth_trying`, shared with the live evaluations:
-  a site the last live evaluation could not reach costs the first plan no attempt).
+  (a model error the disturbance estimate has not learnt yet) does not give it up for the rest of the descent: every
+  re-plan tries it (measured in the site demo: re-plans that skipped the site for a few solves after a miss, as the
+  live evaluations do, made 54-68 of 64-73 plans for it and touched down as little as 41 ft inside its near end;
+  keeping the unverified current site plan instead of landing elsewhere let the rotor droop to 61 %). The price:
+  re-plans towards a site beyond reach cost their attempt (up to ``site_max_iterations``) every time. The first plan
+  follows the live evidence (:meth:`~helireach_ros.core.policies.landing_sites.SiteSelection.worth_trying`): a site the
+  last live evaluation could not reach costs it no attempt.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from helireach_ros.core.policies.landing_sites import LandingSite, SiteSelection
 from helireach_ros.core.policies.landing_supervisor import LandingSupervisor, ReplanGate
 from helireach_ros.core.policies.plan_status import PlannerHealth, SolverPoolHealth, StatusReport, planner_health_report
 from helireach_ros.core.policies.vehicle_readings import CurrentState, LatestReadings, RotorSource
-from helireach_ros.core.workers.live_scheduling import LiveScheduler
+from helireach_ros.core.workers.live_scheduling import LiveScheduler, StandbyPlan
 from helireach_ros.core.workers.planner_backend import PlannerBackend
 
 if TYPE_CHECKING:
@@ -119,6 +124,7 @@ class FailurePlanner:
         self._episode_weight: WeightChoice | None = None
         self._sites = sites
         self._episode_site: LandingSite | None = None
+        self._site_standby = False  # the standby plan published at the failure lands on the episode's site
 
     @property
     def not_configured(self) -> str:
@@ -144,13 +150,15 @@ class FailurePlanner:
         with self._lock:
             self._episode_weight = ready_choice(latest, configured, backend.ready_weights())
 
-    def fix_site(self, standby_site: LandingSite | None) -> None:
-        """Fixes the episode's landing site at its start: the standby plan's, else the selection's (None: anywhere)."""
-        site = standby_site
+    def fix_site(self, standby: StandbyPlan | None) -> None:
+        """Fixes the episode's landing site at its start: the standby plan's (``standby``: the one published at the
+        failure, None: none), else the selection's (None: anywhere)."""
+        site = standby.site if standby is not None else None
         if site is None and self._sites is not None:
             site = self._sites.selected()
         with self._lock:
             self._episode_site = site
+            self._site_standby = standby is not None and standby.lands_on_site
 
     @property
     def episode_site(self) -> LandingSite | None:
@@ -181,13 +189,17 @@ class FailurePlanner:
         initial_control: np.ndarray | None = None,
         reaction_delay_s: float | None = None,
         disturbance: np.ndarray | None = None,
+        *,
+        to_site: bool = True,
+        every_time: bool = False,
     ) -> tuple[LandingPlan | None, str]:
         """A failure plan or re-plan for the episode's weight (blocking): (plan, "") or (None, why not); on the
-        episode's site if it has one and a plan for it is verified, else anywhere."""
+        episode's site if it has one, ``to_site`` and a plan for it is verified, else anywhere. The site is tried
+        when the evidence says it is worth it, or ``every_time`` (the re-plans)."""
         if self.backend is None:
             return None, self.not_configured
-        site = self.episode_site
-        tried = site is not None and self._sites is not None and self._sites.worth_trying(site)
+        site = self.episode_site if to_site else None
+        tried = site is not None and self._sites is not None and (every_time or self._sites.worth_trying(site))
         plan, error = self.backend.solve(
             state, warm_start, gross_weight=self.episode_weight.gross_weight, initial_control=initial_control,
             reaction_delay_s=reaction_delay_s, disturbance=disturbance,
@@ -210,22 +222,47 @@ class FailurePlanner:
         envelope = self.backend.envelope if self.backend is not None else None
         stored = envelope.nearest_plan_to(state) if envelope is not None else None
         warm_start, source = (stored.warm_start, "envelope") if stored is not None else (None, "none")
-        plan, error = self.solve(state, warm_start)
+        with self._lock:
+            # Without a standby plan on the site, the deadline is met by a landing anywhere (a site plan costs 3-6x a
+            # compiled solve, an unreachable site its whole iteration limit); the site plan follows it.
+            site_after = self._episode_site is not None and not self._site_standby
+        plan, error = self.solve(state, warm_start, to_site=not site_after)
         if plan is None or not plan.solver.success:
             reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self._sink.report("error", f"failure #{failure.failure_id}: no converged plan ({reason})")
             if self.supervisor.fallback_after_failed_solve(failure, retry=retry, stamp_ns=stamp_ns):
                 self.publish_fallback(failure, state, stamp_ns, reason)
             return
+        if site_after and plan.safe:  # published first: the site plan is off the deadline's path
+            self._sink.publish_plan(failure, plan, current, source, replan=False, robust_pending=False)
+            on_site, _ = self.solve(state, plan.warm_start)
+            if on_site is None or not on_site.safe or on_site.touchdown_window is None or not failure.active:
+                return self._after_first_plan(failure, plan, stamp_ns, publish=None)
+            plan, source = on_site, "previous_plan"
+        self._after_first_plan(failure, plan, stamp_ns, publish=(current, source))
+
+    def _after_first_plan(
+        self,
+        failure: FailureEpisode,
+        plan: LandingPlan,
+        stamp_ns: int,
+        *,
+        publish: tuple[CurrentState, str] | None,
+    ) -> None:
+        """Publishes the failure's first plan (``publish``: its state and warm-start source; None: out already), then,
+        off the failure path, starts its robust verification and the disturbance estimate."""
         robust = self.backend is not None and self.backend.robust is not None and plan.safe
-        self._sink.publish_plan(failure, plan, current, source, replan=False, robust_pending=robust)
+        if publish is not None:
+            current, source = publish
+            self._sink.publish_plan(failure, plan, current, source, replan=False, robust_pending=robust)
         if robust:  # after publishing: off the failure path
             self._submit_robust(failure, plan, stamp_ns)
         if self._disturbance is not None and failure.disturbance is None:  # after publishing: off the failure path
             assert self.backend is not None  # a plan came from it
             model = self.backend.model_for(self.episode_weight.gross_weight)
             failure.disturbance = DisturbanceTracker(model, self._disturbance)
-            failure.disturbance.update(stamp_ns * 1e-9, state, controls_from_stamp(plan, stamp_ns))  # 1st interval
+            first_interval = controls_from_stamp(plan, stamp_ns)
+            failure.disturbance.update(stamp_ns * 1e-9, plan.initial_state, first_interval)
 
     def _submit_robust(self, failure: FailureEpisode, plan: LandingPlan, stamp_ns: int) -> None:
         """Queues the plan's robust verification (its verdict is pending until it comes back)."""
@@ -270,7 +307,7 @@ class FailurePlanner:
         flown = controls_from_stamp(previous.plan, previous.stamp_ns)
         tracker = failure.disturbance
         disturbance = tracker.update(stamp_ns * 1e-9, state, flown) if tracker is not None else None
-        plan, error = self.solve(state, previous.plan.warm_start, flying, 0.0, disturbance)
+        plan, error = self.solve(state, previous.plan.warm_start, flying, 0.0, disturbance, every_time=True)
         self.supervisor.replan_solved(failure, converged=plan is not None and plan.solver.success)
         if plan is None or not plan.solver.success:
             reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")

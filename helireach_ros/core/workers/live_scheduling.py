@@ -18,8 +18,8 @@ plan). :class:`LiveScheduler` decides when one starts and where it runs, and kee
   evaluation lands on it if it can, else anywhere, and records which, so that the standby plan is the selected
   site's whenever the site is reachable;
 - the live reachable footprint (``footprint_period_s``, with a solver pool): at most that often, an evaluation's slot
-  goes to the footprint's two ends instead (nearest then farthest touchdown, each one live job, warm from the latest
-  live plan), published with what they say of each site
+  goes to the footprint's two ends instead (nearest then farthest touchdown, each one live job, warm from its own
+  previous verified solution), published with what they say of each site
   (:func:`~helireach_ros.core.policies.landing_sites.footprint_report`). Its slot is a verdict not made: the standby
   plan is at most one footprint (two solves) older.
 """
@@ -70,6 +70,12 @@ class StandbyPlan:
     weight: WeightChoice
     messages: object | None
     site: LandingSite | None = None
+
+    @property
+    def lands_on_site(self) -> bool:
+        """Its plan was made for its site (and, being a standby, is verified)."""
+        plan = self.verdict.plan
+        return self.site is not None and plan is not None and plan.touchdown_window is not None
 
 
 class LiveScheduler:

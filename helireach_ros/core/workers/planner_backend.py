@@ -18,7 +18,6 @@ from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
-from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -31,7 +30,6 @@ from helireach_ros.core.estimation.weight_tracking import (
     plausible_band,
 )
 from helireach_ros.core.planning.fallback import FallbackPlan, fallback_plan
-from helireach_ros.core.policies.live_reachability import solve_with_cold_check
 from helireach_ros.core.workers.solver_pool import PRIORITY_FAILURE, PRIORITY_LIVE, SolverPool, SolverPoolSettings
 
 if TYPE_CHECKING:
@@ -253,20 +251,15 @@ class PlannerBackend:
         cold_check: bool,
         **request: Any,
     ) -> Any:
-        """A solve here (no pool), as a worker makes it: the site, else anywhere; the cold check if asked."""
-        from helireach_ros.core.policies.landing_sites import solve_site_or_anywhere
+        """A solve here (no pool), as a worker makes it (:func:`~helireach_ros.core.policies.landing_sites.
+        plan_site_or_anywhere`)."""
+        from helireach_ros.core.policies.landing_sites import plan_site_or_anywhere
 
-        def solver(planner: Any, **extra: Any) -> Callable[[np.ndarray, Any], Any]:
-            def solve(at: np.ndarray, warm: Any) -> Any:
-                return planner.plan(at, planner.carried_warm_start(warm), **request, **extra)
-
-            return partial(solve_with_cold_check, solve) if cold_check else solve
-
-        anywhere = solver(self.in_process_planner(gross_weight))
-        if touchdown_window is None:
-            return anywhere(state, warm_start)
-        on_site = solver(self.in_process_planner(gross_weight, site=True), touchdown_window=touchdown_window)
-        return solve_site_or_anywhere(on_site, anywhere, state, warm_start)
+        site_planner = self.in_process_planner(gross_weight, site=True) if touchdown_window is not None else None
+        return plan_site_or_anywhere(
+            self.in_process_planner(gross_weight), site_planner, state, warm_start, touchdown_window,
+            cold_check=cold_check, **request,
+        )  # fmt: skip
 
     def add_weight_sample(self, sample: WeightSample) -> None:
         """A steady-flight reading for the weight estimate (ignored without estimation)."""

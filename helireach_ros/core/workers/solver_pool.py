@@ -34,7 +34,6 @@ the NLP built once and warmed up.
 
 from __future__ import annotations
 
-import functools
 import heapq
 import itertools
 import math
@@ -42,7 +41,6 @@ import multiprocessing
 import os
 import threading
 import time
-from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
@@ -162,8 +160,7 @@ def _worker_main(
     requests until told to stop or the pipe closes."""
     from helireach_ros.core.aircraft.model import initial_state_after_failure
     from helireach_ros.core.planning.planner import get_planner
-    from helireach_ros.core.policies.landing_sites import solve_site_or_anywhere
-    from helireach_ros.core.policies.live_reachability import solve_with_cold_check
+    from helireach_ros.core.policies.landing_sites import plan_site_or_anywhere
 
     held: dict[tuple[float, str], None] = {}  # the recent (weight, objective) NLPs, oldest first: get_planner's cache
 
@@ -209,37 +206,20 @@ def _worker_main(
             return
         try:
             request = decode_dataclass(_SolveRequest, data)
-            common: dict[str, Any] = {
-                "initial_control": request.initial_control,
-                "reaction_delay_s": request.reaction_delay_s,
-                "disturbance": request.disturbance,
-            }
             anywhere_planner = planner_for(request.gross_weight, request.objective, announce=True)
-            solve: Callable[[np.ndarray, Any], LandingPlan] = functools.partial(
-                _carried_solve, anywhere_planner, **common
-            )
-            if request.cold_check:
-                solve = functools.partial(solve_with_cold_check, solve)
+            window, site_planner = None, None
             if request.touchdown_window is not None:
                 window = (float(request.touchdown_window[0]), float(request.touchdown_window[1]))
                 site_planner = planner_for(request.gross_weight, "site", announce=True)
-                on_site: Callable[[np.ndarray, Any], LandingPlan] = functools.partial(
-                    _carried_solve, site_planner, touchdown_window=window, **common
-                )
-                if request.cold_check:
-                    on_site = functools.partial(solve_with_cold_check, on_site)
-                plan = solve_site_or_anywhere(on_site, solve, request.state, request.start)
-            else:
-                plan = solve(request.state, request.start)
+            plan = plan_site_or_anywhere(
+                anywhere_planner, site_planner, request.state, request.start, window, cold_check=request.cold_check,
+                initial_control=request.initial_control, reaction_delay_s=request.reaction_delay_s,
+                disturbance=request.disturbance,
+            )  # fmt: skip
             reply = _SolveReply(plan, "")
         except (ValueError, RuntimeError) as error:
             reply = _SolveReply(None, f"{type(error).__name__}: {error}")
         connection.send_bytes(encode_dataclass(reply))
-
-
-def _carried_solve(planner: Any, state: np.ndarray, warm_start: Any, **request: Any) -> LandingPlan:
-    """``planner.plan`` with a warm start carried across the site row (a site plan starts a re-plan anywhere)."""
-    return planner.plan(state, planner.carried_warm_start(warm_start), **request)
 
 
 @dataclass

@@ -249,7 +249,7 @@ class LandingPlannerNode(Node):
             return
         self.failures.fix_weight(self.live.latest_weight if self.live is not None else None)
         standby = self.live.pause(failure_stamp_ns) if self.live is not None else None
-        self.failures.fix_site(standby.site if standby is not None else None)
+        self.failures.fix_site(standby)
         if standby is not None and (plan := standby.verdict.plan) is not None:
             verdict = standby.verdict
             current = CurrentState(verdict.state, verdict.state_stamp_ns, standby.frame, RotorSource.MEASURED)
