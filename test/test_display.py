@@ -26,6 +26,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import aiohttp
@@ -47,21 +48,33 @@ from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from helireach_ros.core.aircraft.airframe import load_airframe
+from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
 from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState
 from helireach_ros.core.policies.flight_phase import plan_cue_events
+from helireach_ros.core.policies.landing_sites import (
+    LandingSite,
+    SiteSelection,
+    footprint_off_report,
+    footprint_report,
+    site_values,
+)
 from helireach_ros.core.policies.plan_status import plan_values
+from helireach_ros.core.status_values import format_value
 from helireach_ros.core.units import FT, KT
-from helireach_ros.display.node import CockpitDisplay
+from helireach_ros.display.node import FOOTPRINT_MAX_AGE_S, CockpitDisplay
 from helireach_ros.display.pilot_units import axis_margins
 from helireach_ros.display.sections import (
     banner_level,
     boundary_segments,
     episode_section,
+    footprint_section,
     path_section,
     plan_status_section,
     robust_verdict_section,
     rotor_limits_section,
+    site_section,
+    site_verdict,
 )
 from helireach_ros.display.server import DisplayServerError, web_directory
 from helireach_ros.ros import messages as rm
@@ -325,7 +338,9 @@ def status_message(
 
 
 class VehicleAndStatus(Node):
-    """Publishes the state (60 Hz), rotor speed (60 Hz), safety status and failure episode (10 Hz) the test sets."""
+    """Publishes the state (60 Hz), rotor speed (60 Hz), safety status and failure episode (10 Hz) the test sets;
+    the planner's live footprint and live verdict (10 Hz) from ``footprint``/``live``, functions of the stamp now
+    (ns) that return the message, as a planner re-solving them from the latest state would."""
 
     def __init__(self, context: Context, state_topic: str = "/helireach/state") -> None:
         super().__init__("display_test_vehicle", context=context)
@@ -346,6 +361,10 @@ class VehicleAndStatus(Node):
         self.episode_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, rm.LATCHED_QOS)
         self.touchdown_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_TOUCHDOWN, LATCHED)
         self.robust_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT, LATCHED)
+        self.footprint_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_REACHABLE_FOOTPRINT, LATCHED)
+        self.live_publisher = self.create_publisher(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY, LATCHED)
+        self.footprint: Callable[[int], DiagnosticStatus] | None = None
+        self.live: Callable[[int], DiagnosticStatus] | None = None
         self.create_timer(1.0 / 60.0, self._publish_vehicle)
         self.create_timer(0.1, self._publish_status)
 
@@ -379,6 +398,11 @@ class VehicleAndStatus(Node):
             self.status_publisher.publish(status)
         if episode is not None:
             self.episode_publisher.publish(episode)
+        footprint, live, now_ns = self.footprint, self.live, self.get_clock().now().nanoseconds
+        if footprint is not None:
+            self.footprint_publisher.publish(footprint(now_ns))
+        if live is not None:
+            self.live_publisher.publish(live(now_ns))
 
 
 class RosHarness:
@@ -1349,3 +1373,347 @@ def test_boundary_points_join_into_cell_segments() -> None:
     crossings = np.array([[0.0, 2.0], [5.0, 5.0], [10.0, 3.0], [4.0, 0.0]])
     segments = boundary_segments(heights[:2], speeds[:2], saddle, crossings)
     assert undirected(segments) == undirected([(0.0, 2.0, 4.0, 0.0), (5.0, 5.0, 10.0, 3.0)])
+
+
+# ------------------------------------------------------------------------------------------------------------
+# The side view's ground line: the live reachable footprint and the landing site
+# ------------------------------------------------------------------------------------------------------------
+
+GROUND = "window.helireach && window.helireach.ground"
+SIDE_PANEL_HIDDEN = "document.getElementById('side-panel').hidden"
+HERE_M = 1000.0  # the vehicle's along-track distance in these tests, m
+CRUISE = (500 * FT, 75 * KT, 0.0)
+
+
+def cruise_state() -> np.ndarray:
+    """The measured state (y, v, Ω, h, z, P) a footprint or live verdict is solved from."""
+    return np.array([0.0, CRUISE[1], 27.0, CRUISE[0], HERE_M, 0.0])
+
+
+def replayed_landing(start: np.ndarray, touchdown_m: float, window: Any = None, safe: bool = True) -> Any:
+    """A stand-in for a replay-verified LandingPlan touching down at ``touchdown_m`` along the track: only what the
+    planner's reports read of one (safe, the start, the replay's touchdown, the site window it was made for)."""
+    touchdown = np.array(start, dtype=float)
+    touchdown[StateIndex.DISTANCE], touchdown[StateIndex.HEIGHT] = touchdown_m, 0.0
+    replay = SimpleNamespace(touchdown_state=touchdown)
+    return SimpleNamespace(
+        safe=safe, initial_state=np.asarray(start, dtype=float), replay=replay, touchdown_window=window
+    )
+
+
+def footprint_message(
+    stamp_ns: int, nearest_m: float | None, farthest_m: float | None, sites: SiteSelection | None = None
+) -> DiagnosticStatus:
+    """The planner's ``/helireach/reachable_footprint`` (msg_docs/helireach_reachable_footprint.md) from the cruise
+    state, made by its own report: ends along the track, m (None: that end not verified, sent as NaN)."""
+    state = cruise_state()
+    nearest, farthest = (None if end is None else replayed_landing(state, end) for end in (nearest_m, farthest_m))
+    report = footprint_report(nearest, farthest, state=state, stamp_ns=stamp_ns, solve_time_ms=850.0, sites=sites)
+    level = rm.DIAGNOSTIC_LEVELS[report.level]
+    return rm.diagnostic_status(
+        level, "helireach_planner: reachable footprint", report.text, "uh60a_class", report.values
+    )
+
+
+def footprint_off_message() -> DiagnosticStatus:
+    """The planner's one STALE footprint at start-up when it solves none."""
+    report = footprint_off_report("footprint_period is 0")
+    level = rm.DIAGNOSTIC_LEVELS[report.level]
+    return rm.diagnostic_status(
+        level, "helireach_planner: reachable footprint", report.text, "uh60a_class", report.values
+    )
+
+
+def live_site_message(stamp_ns: int, site: LandingSite, touchdown_m: float, aimed: bool = True) -> DiagnosticStatus:
+    """A safe ``/helireach/live_reachability`` verdict from the cruise state with its landing-site keys: a plan made
+    for ``site`` (``aimed``; else one landing anywhere) whose replay touches down at ``touchdown_m``."""
+    plan = replayed_landing(cruise_state(), touchdown_m, (site.start_m, site.end_m) if aimed else None)
+    values = {
+        "status": "safe",
+        "safe": True,
+        "verified": True,
+        "state_stamp_ns": stamp_ns,
+        **site_values(site, plan, 1),
+    }
+    text = "if the engine failed now: SAFE"
+    return rm.diagnostic_status(
+        DiagnosticStatus.OK, "helireach_planner: live reachability", text, "uh60a_class", values
+    )
+
+
+def fly_cruise(harness: RosHarness) -> None:
+    """The vehicle in steady cruise at ``HERE_M``: state, rotor, SAFE status, a normal episode (phase normal)."""
+    vehicle = harness.vehicle
+    vehicle.distance = HERE_M
+    vehicle.rotor_speed = 27.0
+    vehicle.episode = episode_message(EpisodePhase.NORMAL, 0)
+    vehicle.set(CRUISE, status_message(DiagnosticStatus.OK, "safe", *CRUISE[:2], 180.0, display_envelope_id(harness)))
+
+
+@needs_chromium
+def test_side_view_draws_the_footprint_band_and_the_landing_site(
+    ros: RosHarness, browser: Browser, tmp_path: Path
+) -> None:
+    """Both ends verified: a band between them on the ground line; the live verdict's site, named and REACHABLE;
+    once both stop coming (older than the live age), no band and the site's reachability STALE."""
+    vehicle = ros.vehicle
+    alpha = LandingSite("alpha", HERE_M + 400.0, HERE_M + 600.0)
+    sites = SiteSelection([alpha])
+
+    async def scenario(page: DevToolsPage) -> None:
+        fly_cruise(ros)
+        await page.phase("normal", "safe", "NORMAL", "SAFE")
+        assert await page.evaluate(SIDE_PANEL_HIDDEN) is True  # no footprint, no site: no side view in cruise
+
+        vehicle.footprint = lambda now_ns: footprint_message(now_ns, HERE_M + 250.0, HERE_M + 900.0, sites)
+        vehicle.live = lambda now_ns: live_site_message(now_ns, alpha, HERE_M + 500.0)
+        ground = await page.wait_for(
+            GROUND,
+            lambda g: bool(g["footprint"] and g["site"]) and g["site"]["kind"] == "reachable",
+            "the footprint band and the reachable site",
+        )
+        footprint, site = ground["footprint"], ground["site"]
+        assert footprint["drawn"] == "band"
+        assert footprint["nearFt"] == pytest.approx((HERE_M + 250.0) / FT)
+        assert footprint["farFt"] == pytest.approx((HERE_M + 900.0) / FT)
+        assert ground["text"] == f"FOOTPRINT {250.0 / FT:.0f}\u2013{900.0 / FT:.0f} ft AHEAD \u00b7 1 SITE IN FOOTPRINT"
+        assert (site["name"], site["source"], site["inFootprint"]) == ("ALPHA", "live", "reachable")
+        assert site["label"] == "SITE ALPHA \u00b7 REACHABLE"
+        assert (site["startFt"], site["endFt"]) == pytest.approx((alpha.start_m / FT, alpha.end_m / FT))
+        assert await page.evaluate(SIDE_PANEL_HIDDEN) is False
+        assert await page.evaluate("document.getElementById('side-footprint').textContent") == ground["text"]
+        assert await page.evaluate("document.getElementById('side-title').textContent") == (
+            "SIDE VIEW \u00b7 LANDING AREA"
+        )
+        assert await page.evaluate("document.getElementById('side-distance').hidden") is True  # no plan
+        save_artifact(tmp_path, "display-footprint.png", await page.screenshot())
+
+        # a verdict that found no plan for the site: NOT REACHABLE (red), whatever the footprint says
+        vehicle.live = lambda now_ns: live_site_message(now_ns, alpha, HERE_M + 300.0, aimed=False)
+        await page.wait_for(
+            GROUND,
+            lambda g: bool(g["site"]) and g["site"]["label"] == "SITE ALPHA \u00b7 NOT REACHABLE",
+            "the site not reachable",
+        )
+
+        # the planner stops: the latched messages age past the live age; no band, the site no longer judged
+        vehicle.footprint = vehicle.live = None
+        ground = await page.wait_for(
+            GROUND,
+            lambda g: (
+                g["footprint"] is None and g["text"].startswith("FOOTPRINT STALE") and g["site"]["kind"] == "stale"
+            ),
+            "the footprint and the site stale",
+        )
+        assert ground["site"]["label"] == "SITE ALPHA \u00b7 REACHABILITY STALE"
+        assert await page.evaluate("document.getElementById('side-footprint').dataset.kind") == "stale"
+        save_artifact(tmp_path, "display-footprint-stale.png", await page.screenshot())
+        assert page.errors == [], f"the page reported errors: {page.errors}"
+
+    run_page(browser, ros.display.url, scenario)
+
+
+@needs_chromium
+def test_side_view_one_verified_end_is_a_mark_not_a_band(ros: RosHarness, browser: Browser, tmp_path: Path) -> None:
+    """One end verified (the other NaN): a mark at that end only and the text says the other is unknown; no end
+    verified: nothing on the ground line, the text says UNKNOWN."""
+    vehicle = ros.vehicle
+
+    async def scenario(page: DevToolsPage) -> None:
+        fly_cruise(ros)
+        await page.phase("normal", "safe", "NORMAL", "SAFE")
+        vehicle.footprint = lambda now_ns: footprint_message(now_ns, HERE_M + 250.0, None)
+        ground = await page.wait_for(GROUND, lambda g: bool(g["footprint"]), "the nearest end")
+        assert ground["received"] == "partial"
+        assert ground["footprint"]["drawn"] == "nearest" and ground["footprint"]["farFt"] is None
+        assert ground["footprint"]["nearFt"] == pytest.approx((HERE_M + 250.0) / FT)
+        assert ground["text"] == f"FOOTPRINT NEAREST {250.0 / FT:.0f} ft AHEAD \u00b7 FARTHEST UNKNOWN"
+        assert await page.evaluate("document.getElementById('side-footprint').dataset.kind") == "reachable"
+        save_artifact(tmp_path, "display-footprint-one-end.png", await page.screenshot())
+
+        vehicle.footprint = lambda now_ns: footprint_message(now_ns, None, HERE_M + 900.0)
+        ground = await page.wait_for(
+            GROUND, lambda g: bool(g["footprint"]) and g["footprint"]["drawn"] == "farthest", "the farthest end"
+        )
+        assert ground["footprint"]["nearFt"] is None
+        assert ground["text"] == f"FOOTPRINT FARTHEST {900.0 / FT:.0f} ft AHEAD \u00b7 NEAREST UNKNOWN"
+
+        vehicle.footprint = lambda now_ns: footprint_message(now_ns, None, None)
+        ground = await page.wait_for(GROUND, lambda g: g["received"] == "unknown", "no end verified")
+        assert ground["footprint"] is None and ground["text"] == "FOOTPRINT UNKNOWN (NO END VERIFIED)"
+        assert await page.evaluate("document.getElementById('side-footprint').dataset.kind") == "unknown"
+        assert page.errors == [], f"the page reported errors: {page.errors}"
+
+    run_page(browser, ros.display.url, scenario)
+
+
+@needs_chromium
+def test_side_view_footprint_off_draws_nothing(ros: RosHarness, browser: Browser, tmp_path: Path) -> None:
+    """The planner's STALE ``off`` footprint (and no sites): no side view, nothing drawn, no page error."""
+    vehicle = ros.vehicle
+
+    async def scenario(page: DevToolsPage) -> None:
+        fly_cruise(ros)
+        await page.phase("normal", "safe", "NORMAL", "SAFE")
+        wait_until(lambda: vehicle.footprint_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        vehicle.footprint_publisher.publish(footprint_off_message())  # once, latched, as the planner at start-up
+        ground = await page.wait_for(GROUND, lambda g: g["received"] == "off", "the footprint off")
+        assert ground == {"footprint": None, "site": None, "text": "", "received": "off"}
+        assert await page.evaluate(SIDE_PANEL_HIDDEN) is True
+        assert await page.evaluate("document.getElementById('side-footprint').hidden") is True
+        save_artifact(tmp_path, "display-footprint-off.png", await page.screenshot())
+        assert page.errors == [], f"the page reported errors: {page.errors}"
+
+    run_page(browser, ros.display.url, scenario)
+
+
+@needs_chromium
+def test_side_view_shows_the_plan_on_its_site(
+    ros: RosHarness, browser: Browser, real_plan: Any, tmp_path: Path
+) -> None:
+    """After the failure: the plan's path and TD with the plan status' site, ON SITE; the footprint (if the engine
+    failed *now*) is no longer drawn, however fresh."""
+    vehicle = ros.vehicle
+    touchdown = float(real_plan.states[StateIndex.DISTANCE, -1])
+    bravo = LandingSite("bravo", touchdown - 100.0, touchdown + 100.0)
+
+    async def scenario(page: DevToolsPage) -> None:
+        fly_cruise(ros)
+        vehicle.distance = 0.0
+        await page.phase("normal", "safe", "NORMAL", "SAFE")
+        vehicle.footprint = lambda now_ns: footprint_message(now_ns, touchdown - 300.0, touchdown + 300.0)
+        await page.wait_for(GROUND, lambda g: bool(g["footprint"]), "the footprint before the failure")
+
+        for publisher in (vehicle.trajectory_publisher, vehicle.path_publisher, vehicle.plan_status_publisher):
+            wait_until(lambda publisher=publisher: publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+        start = vehicle.get_clock().now().to_msg()
+        vehicle.failure_publisher.publish(Header(stamp=start, frame_id="failure"))
+        vehicle.episode = episode_message(EpisodePhase.FAILED, 1)
+        flying = status_message(DiagnosticStatus.OK, "ENGINE FAILURE: landing plan verified", *CRUISE[:2], 0.0, "")
+        vehicle.set(CRUISE, flying)
+        await page.phase("autorotation", "avoid", "NO PLAN after the failure", "NO PLAN")
+        ground = await page.wait_for(GROUND, lambda g: g["footprint"] is None, "no footprint once the engine failed")
+        assert await page.evaluate(SIDE_PANEL_HIDDEN) is True  # no plan yet, and the footprint no longer applies
+        trajectory, path, plan_status = plan_messages(real_plan, start)
+        planned = replayed_landing(real_plan.states[:, 0], touchdown, (bravo.start_m, bravo.end_m))
+        plan_status.values += [
+            KeyValue(key=k, value=format_value(v)) for k, v in site_values(bravo, planned, 1).items()
+        ]
+        vehicle.trajectory_publisher.publish(trajectory)
+        vehicle.path_publisher.publish(path)
+        vehicle.plan_status_publisher.publish(plan_status)
+        await page.phase("autorotation", "safe", "the verified plan", "VERIFIED")
+        ground = await page.wait_for(
+            GROUND, lambda g: bool(g["site"]) and g["site"]["source"] == "plan", "the plan's site"
+        )
+        assert ground["footprint"] is None and ground["text"] == ""  # the engine has failed: the plan decides
+        assert ground["site"]["kind"] == "reachable"
+        assert ground["site"]["label"] == f"SITE BRAVO \u00b7 ON SITE \u00b7 TD {100.0 / FT:.0f} ft INSIDE"
+        side = await page.evaluate("window.helireach.side")
+        assert side["points"] == len(real_plan.times) and side["distance"].startswith("TO TOUCHDOWN")
+        assert await page.evaluate("document.getElementById('side-title').textContent") == (
+            "SIDE VIEW \u00b7 PLANNED PATH"
+        )
+        save_artifact(tmp_path, "display-plan-on-site.png", await page.screenshot())
+        assert page.errors == [], f"the page reported errors: {page.errors}"
+
+    run_page(browser, ros.display.url, scenario)
+
+
+def test_footprint_frames_age_out_and_the_latest_site_wins(envelope_file: Path) -> None:
+    """Without a browser: the frame's footprint is ``current`` only while its state is at most FOOTPRINT_MAX_AGE_S old;
+    the site comes from the latest live verdict or plan status that carries one."""
+    harness = RosHarness(envelope_file=str(envelope_file))
+    vehicle = harness.vehicle
+    alpha = LandingSite("alpha", HERE_M + 400.0, HERE_M + 600.0)
+    try:
+
+        async def scenario() -> None:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as socket:
+                first = await read_frame(socket)
+                assert first["live"]["footprint"] is None and first["live"]["site"] is None
+                wait_until(lambda: vehicle.footprint_publisher.get_subscription_count() > 0, TIMEOUT_S, "display")
+                now_ns = vehicle.get_clock().now().nanoseconds
+                vehicle.footprint_publisher.publish(footprint_message(now_ns, HERE_M + 250.0, HERE_M + 900.0))
+                vehicle.live_publisher.publish(live_site_message(now_ns, alpha, HERE_M + 500.0))
+                frame = await frame_until(
+                    socket, lambda f: bool(f["live"]["footprint"] and f["live"]["site"]), "footprint and site"
+                )
+                footprint, site = frame["live"]["footprint"], frame["live"]["site"]
+                assert footprint["current"] is True and footprint["status"] == "reachable"
+                assert (footprint["nearest_distance_m"], footprint["farthest_distance_m"]) == (1250.0, 1900.0)
+                assert (site["source"], site["kind"], site["current"]) == ("live", "reachable", True)
+                frame = await frame_until(
+                    socket,
+                    lambda f: not f["live"]["footprint"]["current"] and f["live"]["site"]["kind"] == "stale",
+                    "an old footprint and live verdict",
+                )
+                assert frame["live"]["footprint"]["age_s"] > FOOTPRINT_MAX_AGE_S
+                assert frame["live"]["footprint"]["nearest_verified"] is True  # still said, no longer current
+
+                # a plan status with a site, received later, is the latest that carries one; it holds only during
+                # a failure episode (one of no failure says nothing of now)
+                values = {"status": "safe", "safe": True, "verified": True, **site_values(alpha, None, 1)}
+                values.update(site_planned=False, on_site=False)
+                plan = rm.diagnostic_status(DiagnosticStatus.OK, "helireach_planner: landing plan", "x", "t", values)
+                vehicle.plan_status_publisher.publish(plan)
+                frame = await frame_until(
+                    socket, lambda f: bool(f["live"]["site"]) and f["live"]["site"]["source"] == "plan", "plan site"
+                )
+                assert (frame["live"]["site"]["kind"], frame["live"]["site"]["words"]) == ("stale", "NO PLAN")
+                failure_ns = vehicle.get_clock().now().nanoseconds
+                vehicle.failure_publisher.publish(Header(stamp=rm.stamp_message(failure_ns), frame_id="failure"))
+                await frame_until(socket, lambda f: f["live"]["failure"] is not None, "the failure")
+                values["failure_stamp_ns"] = failure_ns
+                vehicle.plan_status_publisher.publish(
+                    rm.diagnostic_status(DiagnosticStatus.OK, "helireach_planner: landing plan", "x", "t", values)
+                )
+                frame = await frame_until(
+                    socket,
+                    lambda f: bool(f["live"]["site"]) and f["live"]["site"]["kind"] != "stale",
+                    "the failure plan's site",
+                )
+                site = frame["live"]["site"]
+                assert site["source"] == "plan"
+                assert (site["kind"], site["words"]) == ("not_reachable", "NOT REACHABLE \u00b7 LANDING OFF-SITE")
+
+        asyncio.run(scenario())
+    finally:
+        harness.close()
+
+
+def test_footprint_and_site_sections_are_never_optimistic() -> None:
+    stamp_ns = 1_000_000_000
+    both = footprint_section(footprint_message(stamp_ns, HERE_M + 250.0, HERE_M + 900.0))
+    assert (both["off"], both["nearest_verified"], both["farthest_verified"]) == (False, True, True)
+    assert (both["nearest_m"], both["farthest_m"], both["state_stamp_ns"]) == (250.0, 900.0, stamp_ns)
+    one = footprint_section(footprint_message(stamp_ns, HERE_M + 250.0, None))
+    assert (one["status"], one["farthest_verified"], one["farthest_distance_m"]) == ("partial", False, None)
+    off = footprint_section(footprint_off_message())
+    assert off["off"] is True and not off["nearest_verified"] and not off["farthest_verified"]
+    # "true" with no finite distance, or a level from the future: not an end
+    lying = rm.diagnostic_status(
+        DiagnosticStatus.OK,
+        "x",
+        "x",
+        "x",
+        {"status": "reachable", "nearest_verified": True, "nearest_distance_m": math.nan, "farthest_verified": True},
+    )
+    assert not footprint_section(lying)["nearest_verified"] and not footprint_section(lying)["farthest_verified"]
+    future = footprint_message(stamp_ns, HERE_M + 250.0, HERE_M + 900.0)
+    future.level = b"\x07"
+    assert footprint_section(future)["off"] is True and footprint_section(future)["nearest_verified"] is False
+
+    assert site_section({}) is None  # no sites configured
+    site = site_section(rm.status_values(live_site_message(stamp_ns, LandingSite("a", 10.0, 20.0), 15.0)))
+    assert site is not None and (site["name"], site["start_m"], site["end_m"], site["on_site"]) == (
+        "a",
+        10.0,
+        20.0,
+        True,
+    )
+    assert site_verdict(site, "live", current=True) == ("reachable", "REACHABLE")
+    assert site_verdict(site, "live", current=False) == ("stale", "REACHABILITY STALE")
+    assert site_verdict(site, "plan", current=True, plan_void=True) == ("stale", "NO PLAN")
+    assert site_verdict({**site, "on_site": None, "planned": None}, "live", current=True)[0] == "unknown"
+    assert site_verdict({**site, "on_site": False, "planned": True}, "plan", current=True)[0] == "unknown"

@@ -16,12 +16,19 @@ AUTOROTATION the plan; LANDED the touchdown result (``/helireach/touchdown``, el
 recovery; STALE when a streaming source (state, rotor, safety status, failure episode) is silent longer than
 ``stale_after_s``. The page applies the same silence rule to the WebSocket itself.
 
+The side view's ground line: the live reachable footprint (``/helireach/reachable_footprint``) between its verified
+ends, and the selected landing site (the latest ``/helireach/live_reachability`` or ``/helireach/plan_status`` that
+carries ``site_start_m``/``site_end_m``). Never optimistic: an unverified end is not an end; a footprint or live
+verdict whose state is older than ``LIVE_MAX_AGE_S`` (the status node's ``live_max_age``), or a footprint older than
+``FOOTPRINT_MAX_AGE_S``, is not ``current`` (the page then draws no band and says STALE).
+
 Wire format (JSON text frames, SI units; the page converts to ft/kt for people)::
 
     {"config": {...},      # on connect and on change: units, stale_after_s, rotor limits, airframe
      "envelope": {...},    # on connect and on change: H-V grid, status codes, boundary, or an error
      "plan": {...} | null, # on change: trajectory, predicted path, plan status, robust verdict
-     "live": {...}}        # every frame: phase banner, status, state, rotor, failure, episode, touchdown, cue
+     "live": {...}}        # every frame: phase banner, status, state, rotor, failure, episode, touchdown, cue,
+                           # footprint and landing site (with their ages)
 
 Run: ``helireach display`` or ``python -m helireach_ros.display.node --ros-args -p port:=8080``.
 """
@@ -58,17 +65,21 @@ from helireach_ros.core.policies.flight_phase import (
     next_cue,
     plan_cue_events,
 )
+from helireach_ros.core.status_contracts import LiveVerdictValues
 from helireach_ros.core.units import FT, KT
 from helireach_ros.display.pilot_units import axis_margins, thrust_scale
 from helireach_ros.display.sections import (
     envelope_section,
     episode_section,
     finite,
+    footprint_section,
     path_section,
     plan_status_section,
     robust_verdict_section,
     rotor_limits_section,
     safety_status_section,
+    site_section,
+    site_verdict,
     to_json,
     touchdown_section,
     trajectory_section,
@@ -83,6 +94,8 @@ from helireach_ros.ros.qos import QosWatch
 __all__ = [
     "DEFAULT_BIND",
     "DEFAULT_PORT",
+    "FOOTPRINT_MAX_AGE_S",
+    "LIVE_MAX_AGE_S",
     "CockpitDisplay",
     "DisplayParameters",
     "create_display_with_fallback",
@@ -96,6 +109,13 @@ DEFAULT_BIND = "127.0.0.1"
 _PLAN_STAMP_TOLERANCE_S = 10.0  # a plan stamped further from the receipt time uses the receipt time instead
 # A state at or below this height is on the ground (the monitor's landed_height default, msg_docs/...episode.md).
 _CONTACT_HEIGHT_M = 0.3
+#: A live verdict or footprint whose state is older than this is no evidence, s (the status node's ``live_max_age``
+#: default, msg_docs/helireach_live_reachability.md): the side view draws no footprint band and says STALE.
+LIVE_MAX_AGE_S = 1.0
+#: A footprint whose state is older than this is not drawn, s: the planner publishes one at most every
+#: ``footprint_period`` (1 s suggested) and solves its two ends first (~0.3 s warm), so the live age would make the band
+#: flicker; the interval is along the track, in the world, and shrinks slowly with the height (assumed).
+FOOTPRINT_MAX_AGE_S = 2.5
 
 
 @dataclass(frozen=True)
@@ -131,6 +151,7 @@ class _Received:
 
     content: Any
     received: float
+    state_age_s: float | None = None  # age of the message's state stamp at receipt (this node's clock), s
 
 
 @dataclass
@@ -148,6 +169,8 @@ class _Latest:
     robust_verdict: _Received | None = None
     episode: _Received | None = None
     touchdown: _Received | None = None
+    footprint: _Received | None = None
+    live_site: _Received | None = None  # the latest live reachability that carries a landing site
     touchdown_from_state: TouchdownFromState | None = None
     cue_events: tuple[CueEvent, ...] = ()
     margins: dict[str, Any] | None = None
@@ -217,6 +240,8 @@ class CockpitDisplay(Node):
             (DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT, self._on_robust_verdict, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.LATCHED_QOS),
             (DiagnosticStatus, rm.TOPIC_TOUCHDOWN, self._on_touchdown, rm.LATCHED_QOS),
+            (DiagnosticStatus, rm.TOPIC_REACHABLE_FOOTPRINT, self._on_footprint, rm.LATCHED_QOS),
+            (DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY, self._on_live_reachability, rm.LATCHED_QOS),
         ):
             qos_watch.create_subscription(message_type, topic, self._never_raising(callback, topic), qos)
 
@@ -513,6 +538,34 @@ class CockpitDisplay(Node):
 
         self._store(update)
 
+    def _state_age_s(self, stamp_ns: int | None) -> float | None:
+        """Age of a message's state stamp on this node's clock now, s (None without a stamp)."""
+        if stamp_ns is None or stamp_ns <= 0:
+            return None
+        return (self.get_clock().now().nanoseconds - stamp_ns) * 1e-9
+
+    def _on_footprint(self, message: DiagnosticStatus) -> None:
+        content = footprint_section(message)
+        state_age = self._state_age_s(content["state_stamp_ns"])
+
+        def update(latest: _Latest, now: float) -> None:
+            latest.footprint = _Received(content, now, state_age)
+
+        self._store(update)
+
+    def _on_live_reachability(self, message: DiagnosticStatus) -> None:
+        """Only the landing site of a live verdict (the banner follows the status node, which weighs the verdict)."""
+        values = rm.status_values(message)
+        site = site_section(values)
+        if site is None:  # no sites configured, or a verdict without them: the last site shown ages out
+            return
+        state_age = self._state_age_s(LiveVerdictValues.from_values(values).state_stamp_ns)
+
+        def update(latest: _Latest, now: float) -> None:
+            latest.live_site = _Received(site, now, state_age)
+
+        self._store(update)
+
     def _store_plan_part(self, part: str, section: dict[str, Any]) -> None:
         def update(latest: _Latest, now: float) -> None:
             setattr(latest, part, _Received(section, now))
@@ -637,7 +690,63 @@ class CockpitDisplay(Node):
             live["failure"] = {"age_s": age(latest.failure)}
         if latest.episode is not None:
             live["episode"] = {**latest.episode.content, "stale": stale(latest.episode)}
+        live["footprint"] = self._footprint_live(latest, now)
+        live["site"] = self._site_live(latest, now, live["footprint"])
         return live
+
+    @staticmethod
+    def _current_state_age(
+        received: _Received, now: float, max_age_s: float = LIVE_MAX_AGE_S
+    ) -> tuple[float | None, bool]:
+        """The age of a message's state now (s; None: no stamp) and whether it is current (0 ≤ age ≤ max age)."""
+        if received.state_age_s is None:
+            return None, False
+        age = received.state_age_s + max(now - received.received, 0.0)
+        return age, 0.0 <= age <= max_age_s
+
+    @classmethod
+    def _footprint_live(cls, latest: _Latest, now: float) -> dict[str, Any] | None:
+        """The footprint with its age; ``current`` only for a drawable one whose state is recent (never a held page)."""
+        if latest.footprint is None:
+            return None
+        age, current = cls._current_state_age(latest.footprint, now, FOOTPRINT_MAX_AGE_S)
+        content = latest.footprint.content
+        return {**content, "age_s": age, "current": current and not content["off"] and not latest.held}
+
+    @classmethod
+    def _site_live(cls, latest: _Latest, now: float, footprint: Mapping[str, Any] | None) -> dict[str, Any] | None:
+        """The selected landing site from the latest live verdict or plan status that carries one, with what the
+        side view says of it (:func:`~helireach_ros.display.sections.site_verdict`)."""
+        candidates: list[tuple[float, str, _Received]] = []
+        if latest.live_site is not None:
+            candidates.append((latest.live_site.received, "live", latest.live_site))
+        if latest.plan_status is not None and latest.plan_status.content.get("site") is not None:
+            candidates.append((latest.plan_status.received, "plan", latest.plan_status))
+        if not candidates:
+            return None
+        _, source, received = max(candidates, key=lambda candidate: candidate[0])
+        if source == "live":
+            site = received.content
+            age, current = cls._current_state_age(received, now)
+            plan_void = False
+        else:  # the plan's word holds during its failure episode only (not once the engine recovered)
+            site = received.content["site"]
+            age, current = None, True
+            plan_void = received.content.get("status") == "ended" or not cls._in_failure_episode(latest)
+        current = current and not latest.held
+        kind, words = site_verdict(site, source, current, plan_void)
+        in_footprint = None
+        if footprint is not None and footprint["current"]:
+            in_footprint = footprint["sites"].get(site["name"])
+        return {
+            **site,
+            "source": source,
+            "age_s": age,
+            "current": current,
+            "kind": kind,
+            "words": words,
+            "in_footprint": in_footprint,
+        }
 
     @staticmethod
     def _plan_verdict(latest: _Latest) -> PlanVerdictInput | None:

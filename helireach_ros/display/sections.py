@@ -24,7 +24,7 @@ from helireach_ros.core.status_contracts import (
     SafetyStatusValues,
     TouchdownValues,
 )
-from helireach_ros.core.status_values import format_value
+from helireach_ros.core.status_values import format_value, parse_bool
 from helireach_ros.ros import messages as rm
 
 __all__ = [
@@ -34,11 +34,14 @@ __all__ = [
     "envelope_section",
     "episode_section",
     "finite",
+    "footprint_section",
     "path_section",
     "plan_status_section",
     "robust_verdict_section",
     "rotor_limits_section",
     "safety_status_section",
+    "site_section",
+    "site_verdict",
     "to_json",
     "touchdown_section",
     "trajectory_section",
@@ -289,6 +292,7 @@ def plan_status_section(message: DiagnosticStatus) -> dict[str, Any]:
         "robust": plan.robust if isinstance(plan.robust, bool) else None,
         "gross_weight_n": finite(plan.gross_weight),
         "density_altitude_m": finite(plan.density_altitude),
+        "site": site_section(values),
         "values": values,
     }
 
@@ -369,3 +373,107 @@ def safety_status_section(message: DiagnosticStatus) -> dict[str, Any]:
         "margin": finite(status.margin),
         "envelope_id": status.envelope_id,
     }
+
+
+# ----------------------------------------------------------------------------------------------------------
+# Reachable footprint and landing sites (msg_docs/helireach_reachable_footprint.md, the site keys of the live
+# reachability and the plan status): the side view's ground line
+# ----------------------------------------------------------------------------------------------------------
+
+
+def _stamp_ns(text: str | None) -> int | None:
+    try:
+        return int(text) if text is not None else None
+    except ValueError:
+        return None
+
+
+def footprint_section(message: DiagnosticStatus) -> dict[str, Any]:
+    """The live reachable footprint from ``/helireach/reachable_footprint``, SI (along-track metres).
+
+    Never optimistic: an end counts (``*_verified`` True, its distances set) only when the message says ``true`` and
+    its along-track distance is finite; ``off`` is True for a STALE or ``off`` message, an unknown level or status
+    (nothing is drawn for it). ``sites`` maps each ``site_<name>`` to ``reachable``/``not_reachable``/``unknown`` (any
+    other word: ``unknown``).
+
+    Returns:
+        ``{"status", "off", "level", "message", "reason", "nearest_distance_m", "farthest_distance_m", "nearest_m",
+        "farthest_m", "nearest_verified", "farthest_verified", "state_stamp_ns", "sites", "sites_in_footprint"}``.
+    """
+    values = rm.status_values(message)
+    status = values.get("status")
+    # STALE (status off: no footprint solved), a level or status from the future: nothing to draw
+    off = banner_level(message.level) == "nodata" or status not in ("reachable", "partial", "unknown")
+    section: dict[str, Any] = {
+        "status": status if status in ("reachable", "partial", "unknown", "off") else None,
+        "off": off,
+        "level": banner_level(message.level),
+        "message": str(message.message),
+        "reason": values.get("reason", ""),
+        "state_stamp_ns": _stamp_ns(values.get("state_stamp_ns")),
+        "distance_m": finite(values.get("distance_m")),
+    }
+    for end in ("nearest", "farthest"):
+        along = finite(values.get(f"{end}_distance_m"))
+        verified = not off and parse_bool(values.get(f"{end}_verified")) is True and along is not None
+        section[f"{end}_verified"] = verified
+        section[f"{end}_distance_m"] = along if verified else None
+        section[f"{end}_m"] = finite(values.get(f"{end}_m")) if verified else None
+    words = ("reachable", "not_reachable", "unknown")
+    section["sites"] = {
+        name[len("site_") :]: (value if value in words and not off else "unknown")
+        for name, value in values.items()
+        if name.startswith("site_") and len(name) > len("site_")
+    }
+    section["sites_in_footprint"] = None if off else finite(values.get("sites_in_footprint"))
+    return section
+
+
+def site_section(values: Mapping[str, str]) -> dict[str, Any] | None:
+    """The landing-site keys of a live reachability or plan status (``landing_site``, ``site_start_m``, ...), SI.
+
+    Returns:
+        ``{"name", "start_m", "end_m", "planned", "on_site", "touchdown_distance_m", "margin_m",
+        "sites_reachable"}`` (flags True/False/None as sent), or None without a site (no finite ``site_start_m`` and
+        ``site_end_m``: the keys are absent when no sites are configured).
+    """
+    start, end = finite(values.get("site_start_m")), finite(values.get("site_end_m"))
+    if start is None or end is None:
+        return None
+    return {
+        "name": str(values.get("landing_site", "")),
+        "start_m": min(start, end),
+        "end_m": max(start, end),
+        "planned": parse_bool(values.get("site_planned")),
+        "on_site": parse_bool(values.get("on_site")),
+        "touchdown_distance_m": finite(values.get("touchdown_distance_m")),
+        "margin_m": finite(values.get("site_margin_m")),
+        "sites_reachable": finite(values.get("sites_reachable")),
+    }
+
+
+def site_verdict(site: Mapping[str, Any], source: str, current: bool, plan_void: bool = False) -> tuple[str, str]:
+    """What the side view says of the selected site: ``(kind, words)``.
+
+    ``kind`` is ``reachable`` (green: a verified safe plan lands on it, ``on_site`` true), ``not_reachable`` (red:
+    no plan for the site was verified, ``site_planned`` false), ``unknown`` (a plan for the site whose replay does not
+    land on it, or keys missing) or ``stale`` (a live verdict older than the display's live age, or a plan status that
+    no longer applies): never reachable unless the message says so of a verdict that holds now.
+
+    Args:
+        site: a :func:`site_section`.
+        source: ``live`` (``/helireach/live_reachability``: "if the engine failed now") or ``plan`` (the plan status).
+        current: the live verdict's state is recent enough (ignored for a plan).
+        plan_void: the plan status no longer applies (status ``ended``, or no failure episode under way).
+    """
+    if source == "live" and not current:
+        return "stale", "REACHABILITY STALE"
+    if source == "plan" and plan_void:
+        return "stale", "NO PLAN"
+    if site.get("on_site") is True:
+        return "reachable", "ON SITE" if source == "plan" else "REACHABLE"
+    if site.get("planned") is False:
+        return "not_reachable", "NOT REACHABLE" + (" \u00b7 LANDING OFF-SITE" if source == "plan" else "")
+    if site.get("planned") is True:
+        return "unknown", "NOT VERIFIED ON SITE"
+    return "unknown", "REACHABILITY UNKNOWN"

@@ -29,7 +29,13 @@
     rotorBad: "#e00000",
     rotorCaution: "#ffb300",
     ground: "#8d6e3f",
+    footprint: "#00c853",
+    footprintBand: "rgba(0, 200, 83, 0.55)",
+    siteReachable: "#00c853",
+    siteNotReachable: "#ff5050",
+    siteUnknown: "#ffb300",
   };
+  const SITE_COLORS = { reachable: COLORS.siteReachable, not_reachable: COLORS.siteNotReachable, unknown: COLORS.siteUnknown };
 
   const model = {
     config: null,
@@ -377,7 +383,7 @@
     const badge = $("plan-badge");
     $("plan-idle").hidden = state === "shown";
     $("plan-body").hidden = state !== "shown";
-    $("side-panel").hidden = state !== "shown";
+    $("side-panel").hidden = state !== "shown" && !groundLine().show;
     if (state === "none") $("plan-idle").textContent = "ENGINE NORMAL \u00b7 NO PLAN";
     if (state === "planning") $("plan-idle").textContent = "ENGINE FAILURE \u00b7 PLANNING\u2026";
     if (state === "error") $("plan-idle").textContent = `PLAN UNREADABLE: ${model.plan.trajectory.error}`.toUpperCase();
@@ -889,28 +895,182 @@
     });
   }
 
+  // What the side view's ground line shows (the server's live.footprint and live.site, SI along-track metres):
+  // the reachable footprint between its verified ends ("if the engine failed now": not once it has failed), and the
+  // selected landing site (after the failure: the plan's). Never optimistic: an unverified end is no end; an old footprint (server: not current) or
+  // a stale page draws no band; a site is green only for a current verdict that lands on it, on a page that is live.
+  function groundLine() {
+    const live = model.live;
+    const phase = view.phase === "stale" ? model.lastPhase : view.phase;
+    const failed = phase === "autorotation" || phase === "landed";
+    const pageStale = view.phase === "stale" || model.link !== "up";
+    const raw = live && live.footprint && !live.footprint.off && !failed ? live.footprint : null;
+    let footprint = null;
+    if (raw) {
+      const verified = (end) => raw[`${end}_verified`] === true && isNum(raw[`${end}_distance_m`]);
+      const near = verified("nearest") ? raw.nearest_distance_m : null;
+      const far = verified("farthest") ? raw.farthest_distance_m : null;
+      const ahead = (end, along) => (isNum(raw[`${end}_m`]) ? raw[`${end}_m`] : along - (isNum(raw.distance_m) ? raw.distance_m : NaN));
+      let drawn = null;
+      let text;
+      if (pageStale) {
+        text = "FOOTPRINT NOT SHOWN: DATA STALE";
+      } else if (!raw.current) {
+        text = `FOOTPRINT STALE (${isNum(raw.age_s) ? `${fmt(raw.age_s, 1)} s OLD` : "NO STAMP"})`;
+      } else if (isNum(near) && isNum(far)) {
+        drawn = "band";
+        text = `FOOTPRINT ${fmt(ft(ahead("nearest", near)))}\u2013${fmt(ft(ahead("farthest", far)))} ft AHEAD`;
+      } else if (isNum(near)) {
+        drawn = "nearest";
+        text = `FOOTPRINT NEAREST ${fmt(ft(ahead("nearest", near)))} ft AHEAD \u00b7 FARTHEST UNKNOWN`;
+      } else if (isNum(far)) {
+        drawn = "farthest";
+        text = `FOOTPRINT FARTHEST ${fmt(ft(ahead("farthest", far)))} ft AHEAD \u00b7 NEAREST UNKNOWN`;
+      } else {
+        text = "FOOTPRINT UNKNOWN (NO END VERIFIED)";
+      }
+      if (drawn && isNum(raw.sites_in_footprint)) {
+        text += ` \u00b7 ${fmt(raw.sites_in_footprint)} SITE${raw.sites_in_footprint === 1 ? "" : "S"} IN FOOTPRINT`;
+      }
+      footprint = {
+        drawn,
+        kind: drawn ? "reachable" : raw.current && !pageStale ? "unknown" : "stale",
+        text,
+        nearFt: drawn && drawn !== "farthest" ? ft(near) : null,
+        farFt: drawn && drawn !== "nearest" ? ft(far) : null,
+      };
+    }
+    let site = null;
+    const rawSite = live && live.site;
+    // after the failure only the plan's site (landed: nothing; the plan no longer applies)
+    const siteApplies = rawSite && (!failed || (phase === "autorotation" && rawSite.source === "plan"));
+    if (siteApplies && isNum(rawSite.start_m) && isNum(rawSite.end_m)) {
+      // never green on a stale page (as the plan badge)
+      const kind = pageStale && rawSite.kind === "reachable" ? "stale" : rawSite.kind || "unknown";
+      let words = rawSite.words || "REACHABILITY UNKNOWN";
+      if (rawSite.source === "plan" && rawSite.on_site === true && isNum(rawSite.margin_m)) {
+        words += ` \u00b7 TD ${fmt(Math.abs(ft(rawSite.margin_m)))} ft ${rawSite.margin_m >= 0 ? "INSIDE" : "OUTSIDE"}`;
+      }
+      const name = String(rawSite.name || "").toUpperCase();
+      site = {
+        name,
+        kind,
+        source: rawSite.source,
+        label: `${name ? `SITE ${name}` : "SITE"} \u00b7 ${words}`,
+        startFt: ft(rawSite.start_m),
+        endFt: ft(rawSite.end_m),
+        inFootprint: rawSite.in_footprint || null,
+      };
+    }
+    return { show: Boolean(footprint || site), drawable: Boolean((footprint && footprint.drawn) || site), footprint, site };
+  }
+
+  // The ground line's marks: the footprint band (one verified end: a mark at that end only) and the site interval;
+  // returns what was drawn (for window.helireach.ground) and draws the labels later (above the path: drawGroundLabels).
+  function drawGround(context, frame, ground) {
+    const groundY = frame.y(0);
+    const shown = { footprint: null, site: null };
+    const labels = [];
+    const footprint = ground.footprint;
+    if (footprint && footprint.drawn) {
+      context.fillStyle = COLORS.footprintBand;
+      context.strokeStyle = COLORS.footprint;
+      context.lineWidth = 3;
+      const ends = [footprint.nearFt, footprint.farFt].filter(isNum).map((x) => frame.x(x));
+      if (footprint.drawn === "band") context.fillRect(Math.min(...ends), groundY - 10, Math.max(Math.abs(ends[1] - ends[0]), 2), 10);
+      context.beginPath();
+      for (const x of ends) {
+        context.moveTo(x, groundY + 2);
+        context.lineTo(x, groundY - 16);
+      }
+      context.stroke();
+      if (footprint.drawn !== "band") {
+        const words = footprint.drawn === "nearest" ? "NEAREST TD \u00b7 FARTHEST ?" : "FARTHEST TD \u00b7 NEAREST ?";
+        labels.push({ text: words, x: ends[0], y: groundY - 18, color: COLORS.footprint, font: 'bold 12px "DejaVu Sans", Arial, sans-serif' });
+      }
+      shown.footprint = { drawn: footprint.drawn, nearFt: footprint.nearFt, farFt: footprint.farFt };
+    }
+    const site = ground.site;
+    if (site) {
+      const color = SITE_COLORS[site.kind] || COLORS.stale;
+      const x0 = frame.x(site.startFt);
+      const x1 = frame.x(site.endFt);
+      const top = groundY - 28;
+      for (const [stroke, widthPx] of [["#000000", 6], [color, 3]]) {
+        context.strokeStyle = stroke;
+        context.lineWidth = widthPx;
+        context.beginPath();
+        context.moveTo(x0, groundY + 2);
+        context.lineTo(x0, top);
+        context.lineTo(x1, top);
+        context.lineTo(x1, groundY + 2);
+        context.stroke();
+      }
+      labels.push({ text: site.label, x: (x0 + x1) / 2, y: top - 3, color, font: 'bold 13px "DejaVu Sans", Arial, sans-serif' });
+      shown.site = { name: site.name, kind: site.kind, label: site.label, startFt: site.startFt, endFt: site.endFt, source: site.source, inFootprint: site.inFootprint };
+    }
+    return { shown, labels };
+  }
+
+  // Labels centred over their mark, kept inside the frame, on a dark backing so that the path cannot hide them.
+  function drawGroundLabels(context, frame, labels) {
+    for (const label of labels) {
+      context.font = label.font;
+      const half = context.measureText(label.text).width / 2;
+      const x = Math.min(Math.max(label.x, frame.left + half + 2), frame.right - half - 2);
+      context.fillStyle = "rgba(12, 17, 23, 0.8)";
+      context.fillRect(x - half - 3, label.y - 15, 2 * half + 6, 16);
+      context.fillStyle = label.color;
+      context.textAlign = "center";
+      context.textBaseline = "bottom";
+      context.fillText(label.text, x, label.y);
+    }
+  }
+
   // Side view: height against distance along the track, the planned path (magenta), the touchdown point (TD)
-  // and the aircraft; the distance to the touchdown point is the path's last x minus the aircraft's x.
+  // and the aircraft; the distance to the touchdown point is the path's last x minus the aircraft's x. On its ground
+  // line the reachable footprint and the landing site (groundLine); without a plan, only those and the aircraft.
   function drawSideView() {
     const canvas = $("side-canvas");
-    const path = planState() === "shown" && model.plan.path;
+    const planShown = planState() === "shown";
+    const path = planShown && model.plan.path && !model.plan.path.error ? model.plan.path : null;
+    const ground = groundLine();
     view.side = null;
-    if (!path || path.error || canvas.clientHeight < 20) {
-      $("side-distance").textContent = "TO TOUCHDOWN ---";
-      return;
-    }
-    const { context, width, height } = prepareCanvas(canvas);
+    const footprintText = ground.footprint ? ground.footprint.text : "";
+    const received = model.live && model.live.footprint ? model.live.footprint.status : null;
+    view.ground = { footprint: null, site: null, text: footprintText, received };
+    const footprintLine = $("side-footprint");
+    footprintLine.textContent = footprintText;
+    footprintLine.hidden = !ground.footprint;
+    setData(footprintLine, "kind", ground.footprint ? ground.footprint.kind : "none");
+    $("side-title").textContent = planShown ? "SIDE VIEW \u00b7 PLANNED PATH" : "SIDE VIEW \u00b7 LANDING AREA";
+    $("side-distance").hidden = !planShown;
+    $("side-distance").textContent = "TO TOUCHDOWN ---";
+    if (canvas.clientHeight < 20) return;
+    const { context, width, height } = prepareCanvas(canvas); // cleared: nothing old stays drawn
+    if (!path && !ground.drawable) return;
     const points = [];
-    path.x_m.forEach((x, i) => {
-      if (isNum(x) && isNum(path.z_m[i])) points.push([ft(x), ft(Math.max(path.z_m[i], 0))]);
-    });
-    if (points.length < 2) return;
+    if (path) {
+      path.x_m.forEach((x, i) => {
+        if (isNum(x) && isNum(path.z_m[i])) points.push([ft(x), ft(Math.max(path.z_m[i], 0))]);
+      });
+      if (points.length < 2) return;
+    }
     const state = model.live && model.live.state;
     const aircraft = state && isNum(state.distance_m) && isNum(state.height_m) ? [ft(state.distance_m), ft(Math.max(state.height_m, 0))] : null;
-    const xs = points.map((p) => p[0]).concat(aircraft ? [aircraft[0]] : []);
+    const groundXs = [];
+    if (ground.footprint && ground.footprint.drawn) groundXs.push(...[ground.footprint.nearFt, ground.footprint.farFt].filter(isNum));
+    if (ground.site) groundXs.push(ground.site.startFt, ground.site.endFt);
+    const xs = points.map((p) => p[0]).concat(aircraft ? [aircraft[0]] : [], groundXs);
     const ys = points.map((p) => p[1]).concat(aircraft ? [aircraft[1]] : []);
-    const xMin = Math.min(...xs);
-    const xMax = Math.max(...xs, xMin + 1);
+    let xMin = Math.min(...xs);
+    let xMax = Math.max(...xs, xMin + 1);
+    if (groundXs.length) {
+      // room for the marks at the ends and the labels
+      const pad = Math.max(0.04 * (xMax - xMin), 50);
+      xMin -= pad;
+      xMax += pad;
+    }
     const yMax = Math.max(...ys, 10) * 1.1;
     const fontPx = 13;
     const frame = makeFrame(62, 8, width - 14, height - 36, xMin, xMax, 0, yMax);
@@ -934,6 +1094,13 @@
     const xStep = niceStep(xMax - xMin, 6);
     for (let x = Math.ceil(xMin / xStep) * xStep; x <= xMax; x += xStep) context.fillText(String(Number(x.toFixed(0))), frame.x(x), frame.bottom + 6);
     context.fillText("DISTANCE (ft) \u00b7 HEIGHT (ft)", (frame.left + frame.right) / 2, frame.bottom + 20);
+    const { shown: shownGround, labels } = drawGround(context, frame, ground);
+    view.ground = { ...view.ground, ...shownGround };
+    if (!path) {
+      drawSideAircraft(context, frame, state, aircraft);
+      drawGroundLabels(context, frame, labels);
+      return;
+    }
     context.strokeStyle = COLORS.plan;
     context.lineWidth = 3;
     context.beginPath();
@@ -948,19 +1115,25 @@
     context.fillText("TD", frame.x(tdX) - 8, frame.y(tdY) - 6);
     let distanceText = "TO TOUCHDOWN ---";
     if (aircraft) {
-      const stale = state.stale || model.link !== "up";
-      context.fillStyle = stale ? COLORS.stale : COLORS.aircraft;
-      context.strokeStyle = "#000";
-      context.lineWidth = 2;
-      context.beginPath();
-      context.arc(frame.x(aircraft[0]), frame.y(aircraft[1]), 8, 0, 2 * Math.PI);
-      context.fill();
-      context.stroke();
+      drawSideAircraft(context, frame, state, aircraft);
       const toGo = tdX - aircraft[0];
       distanceText = `TO TOUCHDOWN ${fmt(Math.abs(toGo))} ft ${toGo >= 0 ? "AHEAD" : "BEHIND"}`;
     }
+    drawGroundLabels(context, frame, labels);
     $("side-distance").textContent = distanceText;
     view.side = { points: points.length, distance: distanceText };
+  }
+
+  function drawSideAircraft(context, frame, state, aircraft) {
+    if (!aircraft) return;
+    const stale = state.stale || model.link !== "up";
+    context.fillStyle = stale ? COLORS.stale : COLORS.aircraft;
+    context.strokeStyle = "#000";
+    context.lineWidth = 2;
+    context.beginPath();
+    context.arc(frame.x(aircraft[0]), frame.y(aircraft[1]), 8, 0, 2 * Math.PI);
+    context.fill();
+    context.stroke();
   }
 
   // The banner also depends on time (a quiet link), so re-evaluate it even without frames.
