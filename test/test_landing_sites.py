@@ -256,3 +256,24 @@ def test_without_a_safe_landing_the_best_effort_is_a_converged_plan_not_a_failed
     assert not plan.safe and plan.solver.success
     attempts = [solve_site(state, None), solve_anywhere(state, None)]
     assert plan.value == pytest.approx(min(p.value for p in attempts if p.solver.success))
+
+
+def test_a_mission_managers_message_replaces_the_sites_and_the_report_says_what_is_in_use() -> None:
+    from helireach_ros.core.policies.landing_sites import sites_from_message, sites_report
+
+    selection = SiteSelection(parse_landing_sites(["a:0:10"]))
+    selection.record(selection.sites[0], False)
+    sites, selected = sites_from_message({"landing_sites": "b:20:30; c:40:50", "selected_site": "c"})
+    selection.replace(sites, selected)
+    assert selection.selected() == sites[1] and selection.source == "topic"
+    assert selection.reachability(sites[0]) is None and selection.reachable_count() == 0  # the old evidence is gone
+    report = sites_report(selection)
+    assert report.level == "OK" and report.values["landing_sites"] == "b:20:30;c:40:50"
+    assert report.values["selection"] == "c" and "the crew's c" in report.text
+    for bad in ({}, {"landing_sites": "b:30:20"}, {"landing_sites": "b:20:30", "selected_site": "z"}):
+        with pytest.raises(ValueError):
+            selection.replace(*sites_from_message(bad))
+    assert selection.selected() == sites[1]  # a refused message changes nothing
+    empty = sites_report(SiteSelection(()))
+    assert empty.level == "WARN" and empty.values["site_count"] == 0 and "landing anywhere" in empty.text
+    assert sites_report(None, "broken").values["reason"] == "broken"

@@ -71,3 +71,45 @@ def test_the_statuses_name_the_site_before_and_after_the_failure(site_demo) -> N
     first = next(values for values in plans if "landing_site" in values)
     assert first["landing_site"] == "demo_site" and first["on_site"] == "true" and first["standby"] == "true"
     assert float(first["site_start_m"]) == pytest.approx(site_demo.site.start_m, abs=1e-3)
+
+
+def test_a_mission_managers_sites_replace_the_parameters_and_the_live_verdicts_aim_at_them(context) -> None:
+    """Monitor + planner (real workers): the parameter's site out of reach, then a mission manager's latched list with
+    a reachable site: the planner adopts it, says so on /helireach/landing_sites, and the live verdicts land on it; a
+    malformed list is refused and the sites in use are kept."""
+    from test_live_planner_ros import LEVEL, stream_until
+    from test_ros_nodes import monitor_and_planner
+
+    harness, _ = monitor_and_planner(
+        context, replan_period=0.0, live_rate=5.0, landing_sites="far:5000:5100", landing_sites_topic=True
+    )
+    adopted = harness.listen(DiagnosticStatus, rm.TOPIC_LANDING_SITES)
+    live = harness.listen(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
+    mission = harness.probe.create_publisher(DiagnosticStatus, rm.TOPIC_MISSION_LANDING_SITES, rm.LATCHED_QOS)
+    try:
+        assert harness.spin_until(lambda: bool(adopted))
+        first = rm.status_values(adopted[-1])
+        assert first["source"] == "parameter" and first["landing_sites"] == "far:5000:5100"
+
+        def aimed_at(name: str, on_site: str):
+            return lambda: any(
+                rm.status_values(m).get("landing_site") == name and rm.status_values(m).get("on_site") == on_site
+                for m in live
+            )
+
+        assert stream_until(harness, LEVEL, aimed_at("far", "false")), "no live verdict for the parameter's site"
+        values = {"landing_sites": "field:150:450;far:5000:5100", "selected_site": "field"}
+        mission.publish(rm.diagnostic_status(DiagnosticStatus.OK, "mission: landing sites", "", "", values))
+        assert harness.spin_until(lambda: rm.status_values(adopted[-1])["source"] == "topic")
+        now = rm.status_values(adopted[-1])
+        assert now["selected_site"] == now["selection"] == "field" and now["site_count"] == "2"
+        assert adopted[-1].level == DiagnosticStatus.OK
+        live.clear()
+        assert stream_until(harness, LEVEL, aimed_at("field", "true")), "the live verdicts do not land on the new site"
+        broken = {"landing_sites": "field:450:150"}  # reversed ends
+        mission.publish(rm.diagnostic_status(DiagnosticStatus.OK, "mission: landing sites", "", "", broken))
+        assert harness.spin_until(lambda: "refused" in rm.status_values(adopted[-1])["reason"])
+        kept = rm.status_values(adopted[-1])
+        assert kept["landing_sites"] == "field:150:450;far:5000:5100" and kept["selection"] == "field"
+    finally:
+        harness.close()

@@ -154,6 +154,7 @@ def test_every_topic_has_its_documented_type_and_qos(no_ros_discovery) -> None:
             rm.TOPIC_FAILURE_EPISODE,
             rm.TOPIC_LIVE_REACHABILITY,
             rm.TOPIC_REACHABLE_FOOTPRINT,
+            rm.TOPIC_LANDING_SITES,
             rm.TOPIC_LANDING_TRAJECTORY,
             rm.TOPIC_LANDING_PATH,
             rm.TOPIC_PLAN_STATUS,

@@ -62,8 +62,10 @@ __all__ = [
     "TOPIC_FAILURE_EPISODE",
     "TOPIC_FAILURE_EVENT",
     "TOPIC_LANDING_PATH",
+    "TOPIC_LANDING_SITES",
     "TOPIC_LANDING_TRAJECTORY",
     "TOPIC_LIVE_REACHABILITY",
+    "TOPIC_MISSION_LANDING_SITES",
     "TOPIC_ODOMETRY",
     "TOPIC_PLAN_STATUS",
     "TOPIC_REACHABLE_FOOTPRINT",
@@ -105,6 +107,8 @@ TOPIC_FAILURE_EPISODE = "/helireach/failure_episode"
 TOPIC_SAFETY_STATUS = "/helireach/safety_status"
 TOPIC_LIVE_REACHABILITY = "/helireach/live_reachability"
 TOPIC_REACHABLE_FOOTPRINT = "/helireach/reachable_footprint"
+TOPIC_LANDING_SITES = "/helireach/landing_sites"
+TOPIC_MISSION_LANDING_SITES = "/mission/landing_sites"  # an input: a mission manager's sites (landing_sites_topic)
 TOPIC_LANDING_TRAJECTORY = "/helireach/landing_trajectory"
 TOPIC_LANDING_PATH = "/helireach/landing_path"
 TOPIC_PLAN_STATUS = "/helireach/plan_status"
@@ -184,6 +188,7 @@ TOPICS: dict[str, TopicSpec] = {
         ),
         TopicSpec(TOPIC_LIVE_REACHABILITY, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_REACHABLE_FOOTPRINT, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
+        TopicSpec(TOPIC_LANDING_SITES, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_TRAJECTORY, "trajectory_msgs/msg/JointTrajectory", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_LANDING_PATH, "nav_msgs/msg/Path", LATCHED_QOS, "helireach_planner"),
         TopicSpec(TOPIC_PLAN_STATUS, "diagnostic_msgs/msg/DiagnosticStatus", LATCHED_QOS, "helireach_planner"),

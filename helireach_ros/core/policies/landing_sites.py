@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -49,8 +49,12 @@ __all__ = [
     "footprint_off_report",
     "footprint_report",
     "parse_landing_sites",
+    "parse_site_list",
     "plan_site_or_anywhere",
+    "site_list_text",
     "site_values",
+    "sites_from_message",
+    "sites_report",
     "solve_site_or_anywhere",
 ]
 
@@ -118,6 +122,58 @@ def parse_landing_sites(entries: Sequence[str]) -> tuple[LandingSite, ...]:
     return tuple(sites)
 
 
+def parse_site_list(text: str) -> tuple[LandingSite, ...]:
+    """Sites from one string, ``"name:start_m:end_m;name:start_m:end_m"`` (the planner parameter ``landing_sites``
+    and the ``landing_sites`` value of a mission manager's message); empty entries are ignored.
+
+    Raises:
+        ValueError: as :func:`parse_landing_sites`.
+    """
+    return parse_landing_sites([entry for entry in str(text).split(";") if entry.strip()])
+
+
+def site_list_text(sites: Sequence[LandingSite]) -> str:
+    """The sites as :func:`parse_site_list` reads them."""
+    return ";".join(f"{site.name}:{site.start_m:g}:{site.end_m:g}" for site in sites)
+
+
+def sites_from_message(values: Mapping[str, str]) -> tuple[tuple[LandingSite, ...], str]:
+    """The sites and the crew's choice a mission manager sends (msg_docs/mission_landing_sites.md): the values
+    ``landing_sites`` (as the parameter) and ``selected_site`` ('' or absent = automatic).
+
+    Raises:
+        ValueError: no ``landing_sites`` value, or one :func:`parse_site_list` refuses.
+    """
+    if "landing_sites" not in values:
+        raise ValueError("a landing-sites message needs a 'landing_sites' value ('name:start_m:end_m;...')")
+    return parse_site_list(values["landing_sites"]), str(values.get("selected_site", "")).strip()
+
+
+def sites_report(selection: SiteSelection | None, reason: str = "") -> StatusReport:
+    """The planner's landing sites as it uses them (``/helireach/landing_sites``, latched): OK with sites, WARN
+    without (the planner lands anywhere; ``reason`` says why, e.g. a refused list)."""
+    if selection is None or not selection.sites:
+        why = reason or "no landing sites configured"
+        source = selection.source if selection is not None else "parameter"
+        values = {"landing_sites": "", "selected_site": "", "site_count": 0, "source": source, "reason": why}
+        return StatusReport("WARN", f"landing sites: none ({why}): landing anywhere", values)
+    sites, crew = selection.sites, selection.crew_choice
+    selected = selection.selected()
+    values = {
+        "landing_sites": site_list_text(sites),
+        "selected_site": crew,
+        "selection": selected.name if selected is not None else "",
+        "site_count": len(sites),
+        "source": selection.source,
+        "reason": reason,
+    }
+    listed = ", ".join(f"{site.name} {site.start_m:.0f}-{site.end_m:.0f} m" for site in sites)
+    choice = f"the crew's {crew}" if crew else "automatic"
+    refused = f" ({reason})" if reason else ""
+    text = f"landing sites from the {selection.source}: {listed}; selected: {choice}{refused}"
+    return StatusReport("OK", text, values)
+
+
 class SiteSelection:
     """Which site a failure now would land on (see the module docstring). Thread-safe: the live evaluations record
     from the solver's threads, the failure reads on its own.
@@ -130,24 +186,51 @@ class SiteSelection:
         ValueError: ``selected`` names no site of the list.
     """
 
-    def __init__(self, sites: Sequence[LandingSite], selected: str = "") -> None:
-        self.sites = tuple(sites)
-        if selected and selected not in {site.name for site in self.sites}:
-            raise ValueError(f"selected_site {selected!r} is not one of the landing sites")
-        self.crew_choice = selected
+    def __init__(self, sites: Sequence[LandingSite], selected: str = "", source: str = "parameter") -> None:
         self._lock = threading.Lock()
         self._reachable: dict[str, bool] = {}  # the latest evidence per site name
         self._skipped: dict[str, int] = {}  # solves that went straight to anywhere since the site was not reachable
         self._current = 0
+        self._sites: tuple[LandingSite, ...] = ()
+        self._crew_choice = ""
+        self.source = source
+        self.replace(sites, selected, source)
+
+    def replace(self, sites: Sequence[LandingSite], selected: str = "", source: str = "topic") -> None:
+        """New sites and crew choice (e.g. from a mission manager's topic); the evidence about the old ones is dropped.
+
+        Raises:
+            ValueError: ``selected`` names no site of the list (nothing is changed).
+        """
+        sites = tuple(sites)
+        if selected and selected not in {site.name for site in sites}:
+            raise ValueError(f"selected_site {selected!r} is not one of the landing sites")
+        with self._lock:
+            self._sites, self._crew_choice, self.source = sites, selected, source
+            self._reachable.clear()
+            self._skipped.clear()
+            self._current = 0
+
+    @property
+    def sites(self) -> tuple[LandingSite, ...]:
+        """The sites, in the crew's order of preference."""
+        with self._lock:
+            return self._sites
+
+    @property
+    def crew_choice(self) -> str:
+        """The crew's site by name ('' = automatic)."""
+        with self._lock:
+            return self._crew_choice
 
     def selected(self) -> LandingSite | None:
         """The site a failure now would land on (None: no sites)."""
-        if not self.sites:
-            return None
-        if self.crew_choice:
-            return next(site for site in self.sites if site.name == self.crew_choice)
         with self._lock:
-            return self.sites[self._current]
+            if not self._sites:
+                return None
+            if self._crew_choice:
+                return next(site for site in self._sites if site.name == self._crew_choice)
+            return self._sites[self._current]
 
     def record(self, site: LandingSite, reachable: bool) -> None:
         """The latest evidence about ``site``: a plan for it landed on it (``reachable``), or it did not. An
@@ -155,8 +238,9 @@ class SiteSelection:
         with self._lock:
             self._reachable[site.name] = reachable
             self._skipped.pop(site.name, None)
-            if not reachable and not self.crew_choice and self.sites[self._current] == site:
-                self._current = (self._current + 1) % len(self.sites)
+            current = self._sites[self._current] if self._sites else None
+            if not reachable and not self._crew_choice and current == site:
+                self._current = (self._current + 1) % len(self._sites)
 
     def worth_trying(self, site: LandingSite) -> bool:
         """Whether a solve now should try ``site``: yes unless the latest evidence says it is not reachable, and then

@@ -28,7 +28,13 @@ from trajectory_msgs.msg import JointTrajectory
 from helireach_ros.core.estimation.weight_tracking import WeightChoice
 from helireach_ros.core.planning.fallback import FallbackPlan
 from helireach_ros.core.policies.failure_episode import EpisodePhase, EpisodeState, FailureEpisode, PublishedPlan
-from helireach_ros.core.policies.landing_sites import SiteSelection, footprint_off_reason, footprint_off_report
+from helireach_ros.core.policies.landing_sites import (
+    SiteSelection,
+    footprint_off_reason,
+    footprint_off_report,
+    sites_from_message,
+    sites_report,
+)
 from helireach_ros.core.policies.landing_supervisor import EpisodeAction, LandingSupervisor, TimerAction
 from helireach_ros.core.policies.plan_status import (
     PlannerIdentity,
@@ -107,6 +113,8 @@ class LandingPlannerNode(Node):
         self._robust_publisher = latched(DiagnosticStatus, rm.TOPIC_ROBUST_VERDICT)
         self._live_publisher = latched(DiagnosticStatus, rm.TOPIC_LIVE_REACHABILITY)
         self._footprint_publisher = latched(DiagnosticStatus, rm.TOPIC_REACHABLE_FOOTPRINT)
+        self._sites_publisher = latched(DiagnosticStatus, rm.TOPIC_LANDING_SITES)
+        self._publish(self._sites_publisher, "landing sites", sites_report(self.sites, self._sites_note))
         self._diagnostics_publisher = self.create_publisher(
             DiagnosticArray, rm.TOPIC_DIAGNOSTICS, rm.STREAM_QOS, **rm.NO_QOS_EVENTS_PUBLISHER
         )
@@ -131,6 +139,10 @@ class LandingPlannerNode(Node):
         self._qos_watch.create_subscription(
             DiagnosticStatus, rm.TOPIC_FAILURE_EPISODE, self._on_episode, rm.LATCHED_QOS
         )
+        if config.landing_sites_topic and self.sites is not None:
+            self._qos_watch.create_subscription(
+                DiagnosticStatus, rm.TOPIC_MISSION_LANDING_SITES, self._on_mission_sites, rm.LATCHED_QOS
+            )
         # A periodic check, never cancelled or reset from the solver thread (cancelling a timer that the
         # executor is about to fire raises inside the executor). Every half deadline:
         # the fallback goes out within 1.5 deadlines without waking the executor needlessly.
@@ -144,10 +156,12 @@ class LandingPlannerNode(Node):
     # -- startup -----------------------------------------------------------------------------------------------
     def _site_selection(self) -> SiteSelection | None:
         """The landing sites; broken ones are an error and the node lands anywhere (a plan must still come)."""
+        self._sites_note = ""
         try:
             sites = self.config.site_selection()
         except ValueError as error:
-            self.get_logger().error(f"landing sites not usable, landing anywhere: {error}")
+            self._sites_note = f"landing sites not usable: {error}"
+            self.get_logger().error(f"{self._sites_note}; landing anywhere")
             return None
         if sites is not None:
             names = ", ".join(f"{site.name} {site.start_m:g}..{site.end_m:g} m" for site in sites.sites)
@@ -164,7 +178,8 @@ class LandingPlannerNode(Node):
         self.airframe, self.settings = airframe, settings
         self.readings = LatestReadings(airframe, int(self.config.state_timeout * 1e9), rm.DEFAULT_BODY_FRAME)
         if self.sites is not None and settings.method != "flyable":
-            logger.error(f"landing sites need the flyable method, not {settings.method!r}: landing anywhere")
+            self._sites_note = f"landing sites need the flyable method, not {settings.method!r}"
+            logger.error(f"{self._sites_note}: landing anywhere")
             self.sites = None
         self.footprint_off = footprint_off_reason(
             period_s=self.config.footprint_period,
@@ -228,6 +243,21 @@ class LandingPlannerNode(Node):
     # -- the failure --------------------------------------------------------------------------------------------
     def _on_failure_event(self, message: Header) -> None:
         self._start_failure(rm.stamp_nanoseconds(message.stamp))
+
+    def _on_mission_sites(self, message: DiagnosticStatus) -> None:
+        """A mission manager's landing sites replace the current ones (a failure under way keeps its site)."""
+        assert self.sites is not None  # subscribed only with sites
+        try:
+            sites, selected = sites_from_message(rm.status_values(message))
+            self.sites.replace(sites, selected)
+        except ValueError as error:
+            note = f"refused /mission/landing_sites, keeping the sites in use: {error}"
+            self.get_logger().warning(note, throttle_duration_sec=5.0)
+            self._publish(self._sites_publisher, "landing sites", sites_report(self.sites, note))
+            return
+        report = sites_report(self.sites)
+        self._publish(self._sites_publisher, "landing sites", report)
+        self.get_logger().info(report.text)
 
     def _on_episode(self, message: DiagnosticStatus) -> None:
         """Follows the monitor's failure episode: starts a missed one, stops planning for an ended one."""

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings
-from helireach_ros.core.policies.landing_sites import SiteSelection, parse_landing_sites
+from helireach_ros.core.policies.landing_sites import SiteSelection, parse_site_list
 from helireach_ros.core.policies.landing_supervisor import SupervisorSettings
 from helireach_ros.core.policies.live_reachability import LiveSettings
 from helireach_ros.core.workers.planner_backend import BackendSettings
@@ -89,6 +89,9 @@ class PlannerParameters:
         "", "landing sites along the track (odometry x, m): 'name:start_m:end_m' separated by ';' ('' = land anywhere)"
     )
     selected_site: str = parameter("", "the crew's landing site, by name ('' = automatic: the first reachable one)")
+    landing_sites_topic: bool = parameter(
+        False, "take the landing sites from /mission/landing_sites too (latched; the latest replaces the parameter's)"
+    )
     footprint_period: float = parameter(
         0.0,
         "live reachable footprint at most this often, s (0 = off; each takes a live evaluation's slot)",
@@ -144,12 +147,12 @@ class PlannerParameters:
         Raises:
             ValueError: a malformed site, or a selected site that is not in the list.
         """
-        entries = [entry for entry in self.landing_sites.split(";") if entry.strip()]
-        if not entries:
+        sites = parse_site_list(self.landing_sites)
+        if not sites and not self.landing_sites_topic:
             if self.selected_site:
                 raise ValueError(f"selected_site {self.selected_site!r} given without landing_sites")
             return None
-        return SiteSelection(parse_landing_sites(entries), self.selected_site)
+        return SiteSelection(sites, self.selected_site)
 
     def backend_settings(self, *, site_planning: bool = False, footprint: bool = False) -> BackendSettings:
         """How the node solves (``site_planning``: with usable landing sites; ``footprint``: the live footprint)."""
