@@ -658,3 +658,30 @@ def test_a_stored_control_function_with_a_delay_segment_warm_starts_after_it(air
     warm = planner.plan(state, warm_start=from_controls)
     assert warm.solver.warm_started and warm.solver.success
     assert warm.status == planner.plan(state).status
+
+
+def test_a_sweep_over_winds_writes_an_hv_diagram_per_wind_that_only_that_wind_accepts(airframe, tmp_path, context):
+    """``--headwinds-kt``: one file per wind (calm keeps its name); the status node with the aircraft parameter
+    ``headwind`` holds the file of its wind and refuses the calm one, saying which wind each was made for."""
+    from rclpy.parameter import Parameter
+
+    from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
+
+    folder = tmp_path / "winds"
+    result = run_cli("envelope", "compute", "--heights-ft", "300:400:2", "--speeds-kt", "40:50:2", "--workers", "1",
+                     "--headwinds-kt=0,15", "--out", str(folder), "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    calm_file = folder / "uh60a_class_16000lb_da0ft_pf0.npz"
+    windy_file = folder / "uh60a_class_16000lb_da0ft_hw+15kt_pf0.npz"
+    assert sorted(path.name for path in folder.glob("*.npz")) == sorted([calm_file.name, windy_file.name])
+    windy = airframe.with_conditions(headwind=15 * KT)
+    assert load_envelope(windy_file, airframe=windy).status.shape == (2, 2)
+    with pytest.raises(EnvelopeError, match="calm"):
+        load_envelope(calm_file, airframe=windy)
+    for envelope_file, held in ((windy_file, True), (calm_file, False)):
+        overrides = [Parameter("envelope_file", value=str(envelope_file)), Parameter("headwind", value=15 * KT)]
+        node = EnvelopeStatusNode(context=context, parameter_overrides=overrides)
+        try:
+            assert (node.envelope is not None) == held
+        finally:
+            node.destroy_node()

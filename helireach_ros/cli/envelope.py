@@ -68,11 +68,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     compute = commands.add_parser(
         "compute",
-        help="compute an envelope (or a sweep over weights and density altitudes)",
+        help="compute an envelope (or a sweep over weights, density altitudes and winds)",
         description="One verified landing plan per (height, speed) node, warm-started along columns, suspicious "
         "nodes re-solved cold, the boundary bisected to 2 ft / 1 kt. Ctrl-C saves a partial file; --resume "
-        "continues it. With more than one --weights-lb/--density-altitude-ft combination, --out is a folder "
-        "holding one file per combination.",
+        "continues it. With more than one --weights-lb/--density-altitude-ft/--headwinds-kt combination, --out is a "
+        "folder holding one file per combination.",
     )
     compute.add_argument("--airframe", default="uh60a_class", help="airframe name or YAML path (default: %(default)s)")
     add_rotor_model_option(compute)
@@ -96,6 +96,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     compute.add_argument("--weights-lb", default=None, help="comma-separated gross weights, lbf (sweep)")
     compute.add_argument("--density-altitude-ft", default=None, help="comma-separated density altitudes, ft (sweep)")
+    compute.add_argument(
+        "--headwinds-kt",
+        default=None,
+        help="comma-separated steady winds along the track, kt, positive against the flight (sweep; write "
+        "--headwinds-kt=-15,0,15 when the list starts with a minus): an H-V diagram per wind, as the status node "
+        "needs for the planner parameter headwind",
+    )
     _add_executor_arguments(compute)
     compute.add_argument("--out", required=True, help="output .npz (a folder for a sweep of several combinations)")
     compute.add_argument("--resume", action="store_true", help="continue the partial file(s) at --out")
@@ -197,13 +204,16 @@ def _compute(arguments: argparse.Namespace) -> int:
             if arguments.density_altitude_ft
             else [None]
         )
+        winds = parse_list(arguments.headwinds_kt, "--headwinds-kt") if arguments.headwinds_kt else [None]
         airframes = [
             airframe.with_conditions(
                 gross_weight=None if weight is None else weight * LBF,
                 density_altitude=None if altitude is None else altitude * FT,
+                headwind=None if wind is None else wind * KT,
             )
             for weight in weights
             for altitude in altitudes
+            for wind in winds
         ]
         jobs = [
             EnvelopeJob(a, settings, arguments.power_fraction, heights, speeds, climb_rates=climb_rates)
@@ -233,7 +243,8 @@ def _compute(arguments: argparse.Namespace) -> int:
             if progress:
                 progress.message(
                     f"{label}{job.airframe.name}, W = {job.airframe.gross_weight / LBF:.0f} lbf, density altitude "
-                    f"{job.airframe.density_altitude / FT:.0f} ft, power fraction {job.power_fraction:g}: "
+                    f"{job.airframe.density_altitude / FT:.0f} ft, headwind {job.airframe.headwind / KT:+.0f} kt, "
+                    f"power fraction {job.power_fraction:g}: "
                     f"{slices}{len(heights)} x {len(speeds)} nodes, method {job.settings.method}, reaction delay "
                     f"{job.settings.reaction_delay_s:g} s, on {executor.description} -> {path}"
                 )

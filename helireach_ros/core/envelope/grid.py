@@ -9,7 +9,7 @@ import math
 import numpy as np
 
 from helireach_ros.core.aircraft.airframe import Airframe
-from helireach_ros.core.units import FT, LBF
+from helireach_ros.core.units import FT, KT, LBF
 
 __all__ = ["condition_file_name", "parse_list", "parse_range"]
 
@@ -44,8 +44,10 @@ def parse_list(text: str, name: str = "list") -> list[float]:
 
 
 def condition_file_name(airframe: Airframe, power_fraction: float) -> str:
-    """``<airframe>_<weight>lb_da<altitude>ft_pf<fraction>.npz``: one file per sweep combination."""
+    """``<airframe>_<weight>lb_da<altitude>ft[_hw<wind>kt]_pf<fraction>.npz``: one file per sweep combination (the
+    headwind only when there is one: calm files keep their names)."""
+    wind = f"_hw{airframe.headwind / KT:+.0f}kt" if airframe.headwind else ""
     return (
-        f"{airframe.name}_{airframe.gross_weight / LBF:.0f}lb_da{airframe.density_altitude / FT:.0f}ft_"
+        f"{airframe.name}_{airframe.gross_weight / LBF:.0f}lb_da{airframe.density_altitude / FT:.0f}ft{wind}_"
         f"pf{power_fraction:g}.npz"
     )
