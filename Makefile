@@ -6,7 +6,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 OUT ?= out
 
-.PHONY: demo test test-fast lint bench clean venv nlp-cache
+.PHONY: demo test test-fast lint bench clean venv nlp-cache nlp-cache-sites
 
 venv: $(STAMP)
 
@@ -43,6 +43,11 @@ lint: $(STAMP)
 # HELIREACH_NLP_CACHE, CC, HELIREACH_NLP_CFLAGS apply.
 nlp-cache: $(STAMP)
 	$(BIN)/helireach nlp-cache
+
+# Also the landing-site and footprint NLPs (planner parameters landing_sites, footprint_period): ~3.8 min each on 2
+# cores, once; without them those solves run on the plain functions (a site plan ~1.7x as long warm).
+nlp-cache-sites: $(STAMP)
+	$(BIN)/helireach nlp-cache --objective site --objective nearest_touchdown --objective farthest_touchdown
 
 # The benches behind docs/results/: each writes docs/results/data/<bench>.json (--json), one after another (the
 # numbers are times: never two at once), then bench/results_pages.py regenerates the pages from those records.

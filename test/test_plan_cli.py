@@ -136,7 +136,9 @@ def test_nlp_cache_builds_the_default_and_refuses_an_unknown_airframe_with_one_l
     # a hang guard, not a timing: compiling the momentum rotor's NLP takes minutes on 2 cores (bench/ measures it)
     built = _helireach("nlp-cache", timeout_s=900.0)
     assert built.returncode == 0, built.stderr
-    assert built.stdout.startswith("uh60a_class: ") and "linear solver" in built.stdout
+    assert built.stdout.startswith("uh60a_class (terminal): ") and "linear solver" in built.stdout
     refused = _helireach("nlp-cache", "--airframe", "no_such_airframe")
     assert refused.returncode == 2 and refused.stdout == ""
     assert len(refused.stderr.strip().splitlines()) == 1 and "no_such_airframe" in refused.stderr
+    unknown = _helireach("nlp-cache", "--objective", "nowhere")  # refused before anything is built
+    assert unknown.returncode == 2 and unknown.stdout == "" and "objective" in unknown.stderr

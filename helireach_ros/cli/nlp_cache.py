@@ -4,7 +4,9 @@ What ``make nlp-cache`` runs: for each airframe (default ``uh60a_class``) with t
 CasADi functions are generated as C, compiled and stored under their checksum
 (:mod:`helireach_ros.core.ocp.compiled_nlp`), and so is IPOPT's linear solver (:mod:`helireach_ros.core.ocp.block_ldl`).
 Later planners of the same NLP load them; without them the planner runs the plain functions, never an error.
-Exit codes: 0 built (or already there), 2 bad input (an unknown airframe or a broken settings file).
+``--objective`` adds the NLPs of other objectives (repeatable): ``site`` for a planner node with landing sites,
+``nearest_touchdown`` and ``farthest_touchdown`` for its live footprint (each ~3.5 min on 2 cores, once).
+Exit codes: 0 built (or already there), 2 bad input (an unknown airframe or objective, or a broken settings file).
 """
 
 from __future__ import annotations
@@ -26,18 +28,26 @@ def _build(arguments: argparse.Namespace) -> int:
     try:
         settings = load_settings(arguments.settings)
         airframes = [load_airframe(name) for name in arguments.airframe or ["uh60a_class"]]
-    except (ConfigError, FileNotFoundError) as error:
+        variants = [settings, *(settings.replace(objective=objective) for objective in arguments.objective or ())]
+    except (ConfigError, FileNotFoundError, ValueError) as error:
         print(f"helireach nlp-cache: {error}", file=sys.stderr)
         return 2
     for airframe in airframes:
-        planner = LandingPlanner(airframe, settings, codegen)
-        print(f"{airframe.name}: {planner.nlp_functions}; linear solver {planner.linear_solver}")
+        for variant in variants:
+            planner = LandingPlanner(airframe, variant, codegen)
+            functions, solver = planner.nlp_functions, planner.linear_solver
+            print(f"{airframe.name} ({variant.objective}): {functions}; linear solver {solver}")
     return 0
 
 
 def _add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--airframe", action="append", help="airframe name (repeatable; default uh60a_class)")
     parser.add_argument("--settings", help="planner settings file (default config/planner.yaml)")
+    parser.add_argument(
+        "--objective",
+        action="append",
+        help="also the NLP of this objective (repeatable): site, nearest_touchdown, farthest_touchdown",
+    )
     parser.set_defaults(handler=_build)
 
 
