@@ -205,11 +205,9 @@ class SiteSelection:
         sites = tuple(sites)
         if selected and selected not in {site.name for site in sites}:
             raise ValueError(f"selected_site {selected!r} is not one of the landing sites")
-        with self._lock:
+        with self._lock:  # one step: no reader sees the new sites with the old selection index
             self._sites, self._crew_choice, self.source = sites, selected, source
-            self._reachable.clear()
-            self._skipped.clear()
-            self._current = 0
+            self._clear_evidence()
 
     @property
     def sites(self) -> tuple[LandingSite, ...]:
@@ -265,9 +263,12 @@ class SiteSelection:
     def forget(self) -> None:
         """Drops the evidence (a reset; the automatic selection starts again at the first site)."""
         with self._lock:
-            self._reachable.clear()
-            self._skipped.clear()
-            self._current = 0
+            self._clear_evidence()
+
+    def _clear_evidence(self) -> None:  # under the lock
+        self._reachable.clear()
+        self._skipped.clear()
+        self._current = 0
 
 
 def solve_site_or_anywhere(
@@ -395,16 +396,13 @@ def footprint_report(
         "solve_time_ms": solve_time_ms,
         "reason": reason,
     }
-    answers = []
-    for site in sites.sites if sites is not None else ():
-        start, end = site.window_from(state)
-        answer = footprint.site_reachability(start, end)
-        values[f"site_{site.name}"] = answer.value
-        answers.append(f"{site.name} {answer.value.replace('_', ' ')}")
+    reachability = {
+        site.name: footprint.site_reachability(*site.window_from(state)) for site in (sites.sites if sites else ())
+    }
+    values.update({f"site_{name}": answer.value for name, answer in reachability.items()})
     if sites is not None:
-        values["sites_in_footprint"] = sum(
-            footprint.site_reachability(*site.window_from(state)) is SiteReachability.REACHABLE for site in sites.sites
-        )
+        values["sites_in_footprint"] = sum(answer is SiteReachability.REACHABLE for answer in reachability.values())
+    answers = [f"{name} {answer.value.replace('_', ' ')}" for name, answer in reachability.items()]
     ends = f"{footprint.nearest_m:.0f}-{footprint.farthest_m:.0f} m ahead"
     listed = f"; sites: {', '.join(answers)}" if answers else ""
     if verified == 2:

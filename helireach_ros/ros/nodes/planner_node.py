@@ -164,9 +164,7 @@ class LandingPlannerNode(Node):
             self.get_logger().error(f"{self._sites_note}; landing anywhere")
             return None
         if sites is not None:
-            names = ", ".join(f"{site.name} {site.start_m:g}..{site.end_m:g} m" for site in sites.sites)
-            choice = sites.crew_choice or "automatic"
-            self.get_logger().info(f"landing sites: {names}; selected: {choice}")
+            self.get_logger().info(sites_report(sites).text)
         return sites
 
     def _start_backend(self, airframe: Airframe, settings: PlannerSettings) -> None:
