@@ -211,3 +211,24 @@ def test_a_replan_from_a_rotor_a_flare_sped_up_past_the_nlps_line_has_a_plan(pla
     after_first = plan.times > plan.time_to_land * planner.transcription.fractions[0] + 1e-9
     backoff_line = (airframe.limits.max_rotor_speed_ratio - planner.settings.rotor_speed_backoff) * omega0
     assert after_first.sum() > 50 and np.all(plan.states[2, after_first] <= backoff_line * (1 + 1e-6))
+
+
+def test_a_replan_from_a_rotor_inside_the_nlps_line_keeps_it_inside_from_the_start(planner, airframe) -> None:
+    """The first interval's room up to the true limit is for a rotor already past the NLP's line. From a rotor inside
+    it the plan keeps the line at every node from the start: given to every re-plan, that room was what the closed loop
+    flew (re-planned every 0.25 s, it rode the true limit). The state is a re-plan of the demo's closed loop as the
+    flare speeds the rotor up (110.3 %, 390 ft); with the room, its plan went to 114.7 %."""
+    omega0 = airframe.nominal_rotor_speed
+    backoff_line = (airframe.limits.max_rotor_speed_ratio - planner.settings.rotor_speed_backoff) * omega0
+    state = np.array([12.848, 32.077, 29.782, 118.689, 291.292, 0.0])
+    flown = np.array([0.0077, -0.2448])
+    disturbance = np.array([-0.035, -0.172, -0.034])
+    plan = planner.plan(state, None, flown, 0.0, disturbance=disturbance)
+    assert plan.solver.success, plan.solver.status
+    assert plan.safe
+    assert np.max(plan.states[2]) <= backoff_line * (1 + 1e-6), np.max(plan.states[2]) / omega0
+    _, upper = planner.transcription.variable_bounds(np.concatenate([state, flown, disturbance]))
+    past_line = state.copy()
+    past_line[2] = 1.146 * omega0
+    _, upper_past = planner.transcription.variable_bounds(np.concatenate([past_line, flown, disturbance]))
+    assert np.sum(upper_past > upper) == planner.settings.degree  # the first interval's rotor nodes, only there

@@ -144,12 +144,11 @@ def test_settings_are_validated() -> None:
 
 
 def test_a_warm_plan_that_is_not_safe_is_solved_again_cold(airframe, settings, planner) -> None:
-    # Warm-started from a 10 ft hover's (unsafe) plan, the solve from 600 ft / 30 kt does not converge; the cold
+    # Warm-started from a 20 ft hover's (unsafe) plan, the solve from 600 ft / 30 kt does not converge; the cold
     # plan lands. The live verdict must be the cold one, as `helireach plan`. (The verified plans' case, a warm
     # plan at 479 ft / 120 kt that skimmed the ground, does not occur with the flyable plans: no climbing below
-    # the commit height. From a 20 ft hover's plan the warm solve converges since the upper rotor back-off starts
-    # after the first interval.)
-    previous = measured(airframe, 10, 0)
+    # the commit height.)
+    previous = measured(airframe, 20, 0)
     state = measured(airframe, 600, 30)
     warm = planner.plan(failure_now_state(state, 0.0), planner.plan(failure_now_state(previous, 0.0)).warm_start)
     assert not warm.safe  # the case exists (else this test proves nothing)

@@ -60,10 +60,15 @@ def test_todays_plan_is_not_robust_over_the_default_corners_because_named_corner
     assert not verdict.robust
     assert len(verdict.closed_loop) == len(verdict.open_loop) == 16
     # light, clean, a light rotor in dense air: it gains rotor speed faster than any plan for the nominal model
-    # expects, and the model error learnt in flight does not save it (the rotor reaches 115 %)
-    assert _OVERSPEED_CORNER in verdict.failing_models
+    # expects. It lands because every plan keeps the rotor ceiling's back-off from its start (when each re-plan could
+    # ride the true limit through its first interval, the closed loop reached 115 % and failed).
     overspeed = next(outcome for outcome in verdict.closed_loop if outcome.model.label == _OVERSPEED_CORNER)
-    assert not overspeed.touchdown.within_limits and "rotor speed left its limits" in overspeed.touchdown.reason
+    assert overspeed.touchdown.within_limits, overspeed.touchdown.reason
+    # no corner overspeeds the rotor now; what fails is the touchdown (speeds over the limits, a rotor drooped in it)
+    ceiling = planner.airframe.limits.max_rotor_speed_ratio * planner.airframe.nominal_rotor_speed
+    assert all(outcome.touchdown.max_rotor_speed <= ceiling for outcome in verdict.closed_loop)
+    failed = [outcome.touchdown for outcome in verdict.closed_loop if not outcome.within_limits]
+    assert failed and all("exceeds the limits" in touchdown.reason for touchdown in failed)
     failing = len(verdict.failing_models)
     first = next(outcome for outcome in verdict.closed_loop if not outcome.within_limits)
     assert verdict.reason.startswith(f"{failing} of 16 models fail closed loop; first {first.model.label}: ")
@@ -159,21 +164,15 @@ def test_the_default_sets_heavy_light_rotor_corners_have_no_landing_of_their_own
     assert all(value > 0.0 for value in values), values
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="with the momentum rotor 1 of the quarter set's 16 corners (light rotor, thin air, no latency) overspeeds "
-    "the rotor closed loop (115.0 %): the terminal-cost plans ride the rotor's upper limit in the flare; plans "
-    "centred between their limits are the open work",
-)
 def test_with_a_quarter_of_the_default_ranges_the_500_ft_75_kt_plan_is_robust(scenario, planner) -> None:
-    """The issue's "a robust plan from 500 ft / 75 kt exists": not with the default set (the test above says why),
-    but with every range a quarter as wide (config/uncertainty_quarter.yaml): all 16 corners land closed loop,
-    none open loop (the landing leans on feedback)."""
+    """A robust plan from 500 ft / 75 kt exists: not with the default set (the test above says why), but with every
+    range a quarter as wide (config/uncertainty_quarter.yaml): all 16 corners land closed loop, fewer open loop
+    (the landing leans on feedback)."""
     quarter = load_uncertainty_set("uncertainty_quarter")
     verdict = verify_robust(scenario, planner, quarter.verification_design(), design="quarter")
     assert verdict.robust, verdict.reason
     assert len(verdict.closed_loop) == 16 and all(outcome.within_limits for outcome in verdict.closed_loop)
-    assert not any(outcome.within_limits for outcome in verdict.open_loop)
+    assert sum(outcome.within_limits for outcome in verdict.open_loop) < 16
 
 
 def test_the_background_verification_gives_up_after_its_timeout_and_stops_at_once(scenario, planner) -> None:

@@ -514,10 +514,11 @@ class LandingPlanner:
             lbg, ubg = lbg.copy(), ubg.copy()
             lbg[transcription.site_row] = (window[0] + backoff - flown_m) / DISTANCE_SCALE
             ubg[transcription.site_row] = (window[1] - backoff - flown_m) / DISTANCE_SCALE
+        lbx, ubx = transcription.variable_bounds(parameter)
         arguments: dict[str, Any] = {
             "p": parameter,
-            "lbx": transcription.lbx,
-            "ubx": transcription.ubx,
+            "lbx": lbx,
+            "ubx": ubx,
             "lbg": lbg,
             "ubg": ubg,
         }

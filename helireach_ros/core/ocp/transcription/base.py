@@ -183,6 +183,11 @@ class Transcription(ABC):
     def decode(self, solution: np.ndarray, initial_state: np.ndarray) -> DecodedPlan:
         """The decision vector in physical units."""
 
+    def variable_bounds(self, parameter: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The decision vector's bounds (lbx, ubx) for a solve from this parameter (its initial state); the scheme's
+        fixed bounds unless it holds some per initial state."""
+        return self.lbx, self.ubx
+
     def primal_from_controls(
         self, initial_state: np.ndarray, control_times: np.ndarray, control_values: np.ndarray
     ) -> np.ndarray | None:

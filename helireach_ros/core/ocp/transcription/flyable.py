@@ -120,7 +120,9 @@ class FlyableTranscription(VerifiedTranscription):
         terminal_scaled = states[:, -1]
         margins = []
         if settings.objective == "reach_avoid":
-            # the ceiling the NLP holds: the true limit in the first interval, the back-off after it (bounds below)
+            # to the true limit in the first interval, the back-off after it: the NLP holds the back-off in the first
+            # interval too, except from a rotor above its line (variable_bounds); measured to the true limit, the
+            # first interval's margin is never overstated
             ceiling_backoff = np.full(self.n_states, settings.rotor_speed_backoff)
             ceiling_backoff[: settings.degree] = 0.0
             margins = self._path_margins(
@@ -171,10 +173,13 @@ class FlyableTranscription(VerifiedTranscription):
         if airframe.headwind:  # a contact, not a graze (PlannerSettings.wind_touchdown_min_descent_rate)
             touchdown_descent = self.state_index(self.n_states - 1, StateIndex.DESCENT_RATE)
             state_low[touchdown_descent] = settings.wind_touchdown_min_descent_rate / self.state_scale[0]
-        # The upper rotor back-off starts after the first interval, as the lower one ramps in: a re-plan from a
-        # rotor between the NLP's line and the true limit (a flare speeds it up) must bring it inside, and may.
+        # The upper rotor back-off holds from the start, except for a re-plan from a rotor between the NLP's line
+        # and the true limit (a flare speeds it up): that one must bring it inside, and may take the first interval
+        # to (variable_bounds). Given to every plan, the first interval's room was what the closed loop flew:
+        # re-planned every 0.25 s, it rode the true limit and crossed it with a 5 % model error.
         first_interval = [self.state_index(point, 2) for point in range(settings.degree)]  # Ω in interval 1
-        state_high[first_interval] = airframe.limits.max_rotor_speed_ratio * omega0 / self.state_scale[2]
+        state_high_above_line = state_high.copy()
+        state_high_above_line[first_interval] = airframe.limits.max_rotor_speed_ratio * omega0 / self.state_scale[2]
         control_low, control_high = self.scaled_control_bounds(intervals)
         # θ(T) inside the window by a margin: the replay's contact can come a little before T, where θ is on
         # its way from the flare attitude (at 20 deg/s, 0.5 deg is 25 ms of margin).
@@ -185,6 +190,10 @@ class FlyableTranscription(VerifiedTranscription):
         slack_high = -settings.footprint_margin if settings.objective in FOOTPRINT_OBJECTIVES else 1e3
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
         self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, slack_high], control_high, state_high])
+        self._ubx_above_line = np.concatenate(
+            [[settings.max_time_to_land / _TIME_SCALE, slack_high], control_high, state_high_above_line]
+        )
+        self._rotor_line = (airframe.limits.max_rotor_speed_ratio - settings.rotor_speed_backoff) * omega0
 
     def _path_margins(self, *, rotor_ratio, floor, ceiling_backoff, touchdown_pitch) -> list:
         """The reach-avoid value's path and touchdown margins, each 0 at its limit (as the NLP holds it, back-off
@@ -223,8 +232,19 @@ class FlyableTranscription(VerifiedTranscription):
             flyability.touchdown_max_nose_down_pitch - TOUCHDOWN_ATTITUDE_MARGIN,
         )
 
+    def variable_bounds(self, parameter: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The bounds for a solve from ``parameter``: the rotor ceiling's back-off everywhere, unless the initial Ω is
+        above the NLP's line (Ω_max − back-off), when the first interval may reach the true limit on its way inside.
+
+        .. math:: \\Omega_k \\le \\begin{cases} \\Omega_{max} & k \\in \\text{interval 1 and } \\Omega(0) >
+            \\Omega_{max} - b\\,\\Omega_0 \\\\ \\Omega_{max} - b\\,\\Omega_0 & \\text{otherwise} \\end{cases}
+        """
+        above_line = float(parameter[StateIndex.ROTOR_SPEED]) > self._rotor_line
+        return self.lbx, self._ubx_above_line if above_line else self.ubx
+
     def initial_guess(self, initial_state: np.ndarray) -> np.ndarray:
-        return np.clip(super().initial_guess(initial_state), self.lbx, self.ubx)
+        lower, upper = self.variable_bounds(initial_state)
+        return np.clip(super().initial_guess(initial_state), lower, upper)
 
     def interval_controls(self, control_times: np.ndarray, control_values: np.ndarray) -> np.ndarray:
         """The decided breakpoints u_1 … u_K (u_0 is the parameter's)."""
