@@ -26,6 +26,7 @@ import math
 import shlex
 import sys
 from pathlib import Path
+from typing import Any
 
 from helireach_ros.cli.options import add_rotor_model_option
 from helireach_ros.core.ocp.settings import METHODS
@@ -132,6 +133,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     robust.add_argument("--quiet", action="store_true", help="no progress output")
     robust.set_defaults(handler=_robust)
 
+    family = commands.add_parser(
+        "family",
+        help="an envelope family: the conditions it holds for, its members, where they are not monotone",
+        description="Checks every member (complete, unaltered, one grid of weights x density altitudes) and prints "
+        "the range the family answers for, each member's statuses, and the grid nodes where a heavier or higher "
+        "member is safe and its lighter or lower neighbour is not (there the worst of the neighbours is no bound "
+        "between them). Exit 0, or 2 for a family that does not load.",
+    )
+    family.add_argument("folder", help="the family's folder (or its family.json)")
+    family.add_argument("--json", action="store_true", help="print JSON")
+    family.set_defaults(handler=_family)
+
     query = commands.add_parser(
         "query",
         help="status, value and margin at a height and speed",
@@ -139,7 +152,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "is not safe (unsafe, unverified, failed or outside the grid); 2 for bad input (unreadable or mismatched "
         "file, non-finite height or speed).",
     )
-    query.add_argument("file", help="envelope .npz")
+    query.add_argument("file", help="envelope .npz, or an envelope family (its folder or family.json)")
     query.add_argument("--height-ft", type=float, required=True)
     query.add_argument("--speed-kt", type=float, required=True)
     query.add_argument("--climb-rate-fpm", type=float, default=0.0, help="ft/min, positive up (default: 0, level)")
@@ -149,6 +162,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="robust: the robust verdict where the file has one (a safe node that is not robust: not_robust)",
     )  # fmt: skip
     query.add_argument("--json", action="store_true", help="print JSON (status, value, margin, ...)")
+    query.add_argument(
+        "--weight-lb", type=float, default=None,
+        help="a family: the gross weight, lbf (between members: the worst of the neighbouring members)",
+    )  # fmt: skip
+    query.add_argument("--density-altitude-ft", type=float, default=None, help="a family: the density altitude, ft")
+    query.add_argument("--headwind-kt", type=float, default=0.0, help="a family: the headwind, kt (default: calm)")
     query.set_defaults(handler=_query)
 
     plot = commands.add_parser(
@@ -157,7 +176,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description="One file: its H-V diagram (a 3-D file: the slice nearest --climb-rate-fpm, or every slice with "
         "--all-slices). Several files: their boundaries in one figure, each labelled from its metadata.",
     )
-    plot.add_argument("files", nargs="+", metavar="file", help="envelope .npz (several: overlay)")
+    plot.add_argument(
+        "files", nargs="+", metavar="file", help="envelope .npz or family folder (several, or a family: overlay)"
+    )
     plot.add_argument("--out", required=True, help="image file (.png, .svg, .pdf)")
     plot.add_argument("--title", default=None, help="extra title text")
     plot.add_argument(
@@ -236,6 +257,7 @@ def _compute(arguments: argparse.Namespace) -> int:
         executor = make_executor(arguments.workers, arguments.scheduler, arguments.dask_local)
     except (ValueError, OSError) as error:
         return _error(f"cannot start the workers: {error}")
+    family = None if len(paths) == 1 and paths[0] == out else _FamilyIndexWriter(out, jobs, paths, command)
     try:
         for index, (job, path) in enumerate(zip(jobs, paths, strict=True)):
             label = f"[{index + 1}/{len(jobs)}] " if len(jobs) > 1 else ""
@@ -260,6 +282,8 @@ def _compute(arguments: argparse.Namespace) -> int:
                 )
                 save_envelope(envelope, path)
                 _print_robust(path, envelope)
+            if family is not None:
+                family.completed(index, path, envelope.envelope_id)
             counts = {name: int((envelope.status == name).sum()) for name in STATUS_CODES}
             compute = envelope.metadata.get("compute", {})
             print(
@@ -276,6 +300,45 @@ def _compute(arguments: argparse.Namespace) -> int:
     finally:
         executor.close()
     return 0
+
+
+class _FamilyIndexWriter:
+    """The family index of a sweep's folder (core/envelope/family.py): written before the first member, rewritten as
+    each completes; a resumed sweep keeps the members it finds complete."""
+
+    def __init__(self, folder: Path, jobs: list, paths: list[Path], command: str | None) -> None:
+        from helireach_ros.core.envelope.family import FamilyMember, read_family_index, write_family_index
+
+        folder.mkdir(parents=True, exist_ok=True)
+        self._folder, self._command, self._write = folder, command, write_family_index
+        self._airframe = jobs[0].airframe.name
+        previous = {}
+        if (folder / "family.json").is_file():
+            try:
+                previous = {member.file: member for member in read_family_index(folder)[1]}
+            except Exception:  # an unreadable index is rewritten from what the sweep knows
+                previous = {}
+        self.members = []
+        for job, path in zip(jobs, paths, strict=True):
+            member = FamilyMember(
+                file=path.name, gross_weight=job.airframe.gross_weight, density_altitude=job.airframe.density_altitude,
+                headwind=job.airframe.headwind, power_fraction=job.power_fraction,
+            )  # fmt: skip
+            kept = previous.get(path.name)
+            if kept is not None and kept.complete and path.is_file():
+                member = kept
+            self.members.append(member)
+        write_family_index(folder, self._airframe, self.members, command)
+
+    def completed(self, index: int, path: Path, envelope_id: str) -> None:
+        import dataclasses
+
+        from helireach_ros.core.envelope.family import file_sha256
+
+        self.members[index] = dataclasses.replace(
+            self.members[index], complete=True, sha256=file_sha256(path), envelope_id=envelope_id
+        )
+        self._write(self._folder, self._airframe, self.members, self._command)
 
 
 def _robust_job_factory(arguments: argparse.Namespace):
@@ -378,7 +441,7 @@ def _is_partial(path: Path) -> bool:
 
 def _query(arguments: argparse.Namespace) -> int:
     """Exit code 0 safe, 1 not safe (like ``helireach plan``), 2 bad input."""
-    from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
+    from helireach_ros.core.envelope.data import EnvelopeError
     from helireach_ros.core.units import FT, KT
 
     given = (arguments.height_ft, arguments.speed_kt, arguments.climb_rate_fpm)
@@ -393,7 +456,7 @@ def _query(arguments: argparse.Namespace) -> int:
                 airframe = load_airframe(arguments.airframe)
             except ConfigError as error:
                 return _error(str(error))
-        envelope = load_envelope(arguments.file, airframe=airframe)
+        envelope = _envelope_or_family_member(arguments, airframe)
     except EnvelopeError as error:
         return _error(str(error))
     answer = envelope.query(
@@ -409,33 +472,95 @@ def _query(arguments: argparse.Namespace) -> int:
             "airframe": envelope.airframe_name,
             "power_fraction": envelope.power_fraction,
         }
+        document["conditions"] = envelope.conditions
         print(json.dumps(document))
     else:
         print(
             f"{arguments.height_ft:g} ft, {arguments.speed_kt:g} kt, {arguments.climb_rate_fpm:+g} ft/min: "
             f"{answer.status} ({answer.verdict} verdict, value {answer.value:.3f}, "
-            f"margin {answer.margin:.1f} ft/kt) [{envelope.airframe_name}, envelope {envelope.envelope_id}]"
+            f"margin {answer.margin:.1f} ft/kt) [{envelope.airframe_name}, envelope {envelope.envelope_id}, "
+            f"{envelope.conditions}]"
         )
     return 0 if answer.status == "safe" else 1  # unsafe, not_robust, unverified, failed, outside: all "not safe"
 
 
+def _family(arguments: argparse.Namespace) -> int:
+    from helireach_ros.core.envelope.data import STATUS_CODES, EnvelopeError
+    from helireach_ros.core.envelope.family import EnvelopeFamily
+
+    try:
+        family = EnvelopeFamily.load(arguments.folder)
+    except EnvelopeError as error:
+        return _error(str(error))
+    members = [
+        {
+            "file": member.file, "conditions": member.conditions, "envelope_id": envelope.envelope_id,
+            "statuses": {name: int((envelope.status == name).sum()) for name in STATUS_CODES},
+        }
+        for member, envelope in family.members
+    ]  # fmt: skip
+    exceptions = family.monotonicity_exceptions()
+    if arguments.json:
+        print(json.dumps({
+            "airframe": family.airframe_name, "range": family.range_text(), "members": members,
+            "monotonicity_exceptions": exceptions,
+        }))  # fmt: skip
+        return 0
+    print(f"{family.airframe_name} envelope family: answers for {family.range_text()} ({len(members)} members)")
+    for member in members:
+        print(f"  {member['conditions']:32} {member['file']}: {member['statuses']}")
+    print(f"  not monotone in weight or density altitude at {len(exceptions)} grid nodes")
+    for line in exceptions:
+        print(f"    {line}")
+    return 0
+
+
+def _envelope_or_family_member(arguments: argparse.Namespace, airframe: Any) -> Any:
+    """The file's envelope, or a family at ``--weight-lb``/``--density-altitude-ft``/``--headwind-kt``.
+
+    Raises:
+        EnvelopeError: an unreadable file or family, conditions missing for a family (or given for a single file), or
+            outside the family's range.
+    """
+    from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
+    from helireach_ros.core.envelope.family import EnvelopeFamily, is_family
+    from helireach_ros.core.units import FT, KT, LBF
+
+    conditions = (arguments.weight_lb, arguments.density_altitude_ft)
+    if not is_family(arguments.file):
+        if any(value is not None for value in conditions):
+            raise EnvelopeError("--weight-lb and --density-altitude-ft are for an envelope family; a file has its own")
+        return load_envelope(arguments.file, airframe=airframe)
+    if any(value is None or not math.isfinite(value) for value in conditions) or not math.isfinite(
+        arguments.headwind_kt
+    ):
+        raise EnvelopeError("an envelope family needs finite --weight-lb and --density-altitude-ft")
+    family = EnvelopeFamily.load(arguments.file, airframe)
+    return family.at(arguments.weight_lb * LBF, arguments.density_altitude_ft * FT, arguments.headwind_kt * KT)
+
+
 def _plot(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.envelope.data import EnvelopeError, load_envelope
+    from helireach_ros.core.envelope.family import EnvelopeFamily, is_family
     from helireach_ros.core.envelope.plot import plot_all_slices, plot_envelope, plot_overlay
     from helireach_ros.core.units import FT
 
     climb_rate = None if arguments.climb_rate_fpm is None else arguments.climb_rate_fpm * FT / 60.0
     if climb_rate is not None and not math.isfinite(climb_rate):
         return _error(f"--climb-rate-fpm must be finite, got {arguments.climb_rate_fpm}")
+    envelopes, names = [], []
     try:
-        envelopes = [load_envelope(file) for file in arguments.files]
+        for file in arguments.files:  # a family: every member, its boundary labelled by its conditions
+            members = EnvelopeFamily.load(file).members if is_family(file) else [(None, load_envelope(file))]
+            for member, envelope in members:
+                envelopes.append(envelope)
+                names.append(member.file if member is not None else Path(file).name)
     except EnvelopeError as error:
         return _error(str(error))
     if arguments.all_slices and (len(envelopes) > 1 or not envelopes[0].is_3d or climb_rate is not None):
         return _error("--all-slices draws every slice of one 3-D file (no --climb-rate-fpm)")
     try:
         if len(envelopes) > 1:
-            names = [Path(file).name for file in arguments.files]
             path = plot_overlay(envelopes, arguments.out, names, climb_rate=climb_rate, title_extra=arguments.title)
         elif arguments.all_slices:
             path = plot_all_slices(envelopes[0], arguments.out, title_extra=arguments.title)

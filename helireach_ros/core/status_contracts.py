@@ -236,3 +236,4 @@ class SafetyStatusValues(StatusContract):
     topic: ClassVar[str] = "/helireach/safety_status"
     margin: float | None = key("margin_ft_kt", "float")
     envelope_id: str | None = key("envelope_id", "str")
+    envelope_conditions: str | None = key("envelope_conditions", "str")

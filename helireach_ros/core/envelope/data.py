@@ -539,6 +539,11 @@ class Envelope:
         return str(self._metadata.get("airframe", {}).get("name", "unknown"))
 
     @property
+    def conditions(self) -> str:
+        """The conditions the envelope holds for: ``W = 16000 lbf, density altitude 0 ft, calm``."""
+        return _describe_conditions(self._metadata.get("airframe", {}))
+
+    @property
     def rotor_model_text(self) -> str:
         """The rotor model the envelope was computed with, in words ("paper rotor" when the airframe record has
         none: the paper's rotor, or a file from before the rotor model existed; and for the ``paper`` method, whose

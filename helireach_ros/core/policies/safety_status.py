@@ -363,7 +363,10 @@ def assess_safety(
         envelope_verdict: ``robust`` (the envelope's robust verdict where it has one) or ``nominal``.
     """
     values: dict[str, Any] = {
-        **SafetyStatusValues(envelope_id=envelope.envelope_id if envelope is not None else "").to_values(),
+        **SafetyStatusValues(
+            envelope_id=envelope.envelope_id if envelope is not None else "",
+            envelope_conditions=envelope.conditions if envelope is not None else "",
+        ).to_values(),
         "warn_margin_ft_kt": warn_margin,
     }
     state_problem = ""

@@ -158,9 +158,12 @@ class PlannerBackend:
             return None, "no envelope (disabled): cold starts, autorotation-entry fallback"
         try:
             from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+            from helireach_ros.core.envelope.family import family_member_path
 
             resolved = path or str(default_envelope_path())
-            envelope = load_envelope(resolved, self.airframe, self.settings, 0.0)
+            # a family: its member for this airframe's conditions, whose plans are this planner's (none between them)
+            member = family_member_path(resolved, self.airframe)
+            envelope = load_envelope(member or resolved, self.airframe, self.settings, 0.0)
             return envelope, f"envelope {envelope.envelope_id} for warm starts and fallbacks"
         except Exception as error:  # missing or mismatched: plan cold, fall back to the autorotation entry
             note = f"envelope not usable ({type(error).__name__}: {error}): cold starts, autorotation-entry fallback"

@@ -93,7 +93,12 @@ class EnvelopeStatusParameters:
     """The envelope status node's own parameters, SI (one table: :mod:`helireach_ros.ros.parameter_table`); the
     aircraft's (``airframe``, ``gross_weight``, ``density_altitude``) come from ``declare_aircraft``."""
 
-    envelope_file: str = parameter("", "H-V envelope file ('' = the shipped one)", read_only=False)
+    envelope_file: str = parameter(
+        "",
+        "H-V envelope file, or an envelope family's folder (the members for today's weight and density altitude; "
+        "'' = the shipped file)",
+        read_only=False,
+    )
     warn_margin: float = parameter(
         20.0, "WARN below this distance to the boundary (ft/kt units)", (0.0, 1e4), read_only=False
     )
@@ -196,11 +201,19 @@ class EnvelopeStatusNode(Node):
     def _load_envelope(self, path: str) -> None:
         try:
             from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
+            from helireach_ros.core.envelope.family import EnvelopeFamily, is_family
 
             if self.aircraft is None:
                 raise RuntimeError(self._aircraft_error)
             resolved = path or str(default_envelope_path())
-            envelope, error = load_envelope(resolved, self.aircraft), ""
+            envelope: Any
+            if is_family(resolved):  # the member(s) for today's weight, density altitude and wind
+                aircraft = self.aircraft
+                family = EnvelopeFamily.load(resolved, aircraft)
+                envelope = family.at(aircraft.gross_weight, aircraft.density_altitude, aircraft.headwind)
+            else:
+                envelope = load_envelope(resolved, self.aircraft)
+            error = ""
             self.get_logger().info(f"envelope {envelope.envelope_id} loaded from {resolved}: {envelope!r}")
         except Exception as exc:  # a missing module, file or a corrupt one: STALE, never a crash
             resolved = path or "(shipped envelope)"

@@ -1,0 +1,177 @@
+"""Envelope families: a sweep over weight and density altitude written, resumed and answered as one product (real
+IPOPT solves through the CLI, real files), and the status node answering from the members of today's weight."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from functools import partial
+from pathlib import Path
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
+from rclpy.parameter import Parameter
+from test_envelope import run_cli
+from test_ros_nodes import Harness
+
+from helireach_ros.core.envelope.data import EnvelopeError, EnvelopeQuery
+from helireach_ros.core.envelope.family import FAMILY_INDEX, EnvelopeFamily, read_family_index
+from helireach_ros.core.units import FT, KT, LBF
+from helireach_ros.ros import messages as rm
+from helireach_ros.ros.nodes.envelope_status import EnvelopeStatusNode
+from helireach_ros.ros.nodes.monitor import VehicleMonitor
+
+GRID = ("--heights-ft", "200:600:3", "--speeds-kt", "20:60:3")
+CONDITIONS = ("--weights-lb", "15000,16000", "--density-altitude-ft", "0,3000")
+# grid nodes and the points between them
+POINTS = [(height, speed) for height in np.linspace(200, 600, 5) for speed in np.linspace(20, 60, 5)]
+
+
+@pytest.fixture(scope="module")
+def family_folder(tmp_path_factory) -> Path:
+    folder = tmp_path_factory.mktemp("family") / "uh60a"
+    result = run_cli("envelope", "compute", *GRID, *CONDITIONS, "--workers", "2", "--out", str(folder), "--quiet")
+    assert result.returncode == 0, result.stderr
+    return folder
+
+
+def _same(first: EnvelopeQuery, second: EnvelopeQuery) -> bool:
+    numbers = [(first.value, second.value), (first.margin, second.margin)]
+    return (first.status, first.by_interpolation, first.verdict) == (
+        second.status,
+        second.by_interpolation,
+        second.verdict,
+    ) and all(a == b or (math.isnan(a) and math.isnan(b)) for a, b in numbers)
+
+
+def test_a_family_answers_as_its_member_there_and_between_members_never_safer_than_the_worst(
+    family_folder: Path, airframe
+) -> None:
+    family = EnvelopeFamily.load(family_folder, airframe)
+    _, members, command = read_family_index(family_folder)
+    assert len(members) == 4 and all(member.complete and len(member.sha256) == 64 for member in members)
+    assert command is not None and "--weights-lb" in command
+    assert family.weights == (15000 * LBF, 16000 * LBF) and family.density_altitudes == (0.0, 3000 * FT)
+    # the conditions matter here (else "never safer" proves nothing): the heavier member is safe at fewer nodes
+    light = family.at(15000 * LBF, 0.0).members[0][1]
+    heavy = family.at(16000 * LBF, 0.0).members[0][1]
+    assert np.sum(heavy.status == "safe") < np.sum(light.status == "safe")
+
+    for member, envelope in family.members:
+        at_member = family.at(member.gross_weight, member.density_altitude)
+        assert [m for m, _ in at_member.members] == [member]
+        for height, speed in POINTS:
+            assert _same(at_member.query(height * FT, speed * KT), envelope.query(height * FT, speed * KT))
+
+    for weight_lb, altitude_ft, neighbours in ((15500, 1500, 4), (15000, 1500, 2), (15500, 3000, 2)):
+        between = family.at(weight_lb * LBF, altitude_ft * FT)
+        assert len(between.members) == neighbours and "worst of the members" in between.conditions
+        for height, speed in POINTS:
+            answers = [envelope.query(height * FT, speed * KT) for _, envelope in between.members]
+            answer = between.query(height * FT, speed * KT)
+            assert (answer.status == "safe") == all(other.status == "safe" for other in answers)
+            assert not answer.margin > min(other.margin for other in answers)  # NaN (outside the grid) passes
+            assert not answer.value < max(other.value for other in answers)
+
+    for weight_lb, altitude_ft in ((16500, 0), (14000, 0), (15500, -100), (15500, 3500)):
+        with pytest.raises(EnvelopeError, match="outside the family's range"):
+            family.at(weight_lb * LBF, altitude_ft * FT)
+
+
+def test_the_cli_queries_a_family_at_its_conditions_and_refuses_conditions_outside_it(family_folder: Path) -> None:
+    def query(*arguments: str) -> subprocess.CompletedProcess:
+        return run_cli("envelope", "query", *arguments, "--height-ft", "400", "--speed-kt", "40", "--json")
+
+    member_file = family_folder / "uh60a_class_16000lb_da3000ft_pf0.npz"
+    from_file = json.loads(query(str(member_file)).stdout)
+    from_family = json.loads(query(str(family_folder), "--weight-lb", "16000", "--density-altitude-ft", "3000").stdout)
+    assert {key: from_family[key] for key in ("status", "value", "margin")} == {
+        key: from_file[key] for key in ("status", "value", "margin")
+    }
+    between = query(str(family_folder / FAMILY_INDEX), "--weight-lb", "15500", "--density-altitude-ft", "1500")
+    assert "worst of the members" in json.loads(between.stdout)["conditions"]
+    outside = query(str(family_folder), "--weight-lb", "17000", "--density-altitude-ft", "0")
+    assert outside.returncode == 2 and "outside the family's range (15000-16000 lbf, DA 0-3000 ft)" in outside.stderr
+    missing = query(str(family_folder))
+    assert missing.returncode == 2 and "--weight-lb" in missing.stderr
+    assert query(str(member_file), "--weight-lb", "16000", "--density-altitude-ft", "0").returncode == 2
+    summary = run_cli("envelope", "family", str(family_folder), "--json")
+    assert summary.returncode == 0, summary.stderr
+    document = json.loads(summary.stdout)
+    assert document["range"] == "15000-16000 lbf, DA 0-3000 ft" and len(document["members"]) == 4
+    assert isinstance(document["monotonicity_exceptions"], list)
+    figure = family_folder.parent / "family.png"
+    assert run_cli("envelope", "plot", str(family_folder), "--out", str(figure)).returncode == 0
+    assert figure.stat().st_size > 10_000
+
+
+def test_a_killed_family_sweep_resumes_and_keeps_the_members_it_finished(tmp_path: Path, airframe) -> None:
+    folder = tmp_path / "killed"
+    command = [sys.executable, "-m", "helireach_ros.cli.main", "envelope", "compute", *GRID, *CONDITIONS,
+               "--workers", "1", "--out", str(folder), "--quiet"]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+    finished = []
+    deadline = time.monotonic() + 240.0
+    while not finished and time.monotonic() < deadline and process.poll() is None:
+        time.sleep(0.2)
+        if (folder / FAMILY_INDEX).is_file():
+            finished = [member for member in read_family_index(folder)[1] if member.complete]
+    os.killpg(process.pid, signal.SIGKILL)
+    process.wait(timeout=30)
+    assert finished and len(finished) < 4, "the sweep was not caught between its members"
+    with pytest.raises(EnvelopeError, match="not complete"):
+        EnvelopeFamily.load(folder, airframe)
+
+    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True, timeout=300)
+    assert resumed.returncode == 0, resumed.stderr
+    family = EnvelopeFamily.load(folder, airframe)
+    kept = {member.file: member for member, _ in family.members}
+    assert len(kept) == 4
+    for member in finished:
+        assert kept[member.file].sha256 == member.sha256  # finished before the kill: not computed again
+
+
+def _judged_a_state(statuses: list) -> bool:
+    return bool(statuses) and "height_m" in rm.status_values(statuses[-1])
+
+
+def test_the_status_node_answers_from_the_member_of_todays_weight(family_folder: Path, context, airframe) -> None:
+    """A heavier aircraft gets the heavier member's answer: at a state the 15,000 lbf member calls safe and the
+    16,000 lbf one does not, the status is SAFE or CAUTION at 15,000 lbf and AVOID at 16,000 lbf; outside the family's
+    weights there is no envelope (STALE, saying the range)."""
+    family = EnvelopeFamily.load(family_folder, airframe)
+    light, heavy = family.at(15000 * LBF, 0.0), family.at(16000 * LBF, 0.0)
+    state = next(
+        (height, speed)
+        for height, speed in POINTS
+        if light.query(height * FT, speed * KT).status == "safe"
+        and heavy.query(height * FT, speed * KT).status != "safe"
+    )
+    for weight_lb, safe in ((15000, True), (16000, False), (17000, None)):
+        overrides = [
+            Parameter("envelope_file", value=str(family_folder)),
+            Parameter("gross_weight", value=weight_lb * LBF),
+            Parameter("density_altitude", value=0.0),
+        ]
+        status_node = EnvelopeStatusNode(context=context, parameter_overrides=overrides)
+        harness = Harness(context, VehicleMonitor(context=context), status_node)
+        statuses = harness.listen(DiagnosticStatus, rm.TOPIC_SAFETY_STATUS)
+        try:
+            assert harness.keep_publishing(state[0] * FT, state[1] * KT, until=partial(_judged_a_state, statuses))
+            values = rm.status_values(statuses[-1])
+            if safe is None:
+                assert status_node.envelope is None and statuses[-1].level == DiagnosticStatus.STALE
+                assert "outside the family's range (15000-16000 lbf" in statuses[-1].message
+                continue
+            assert f"{weight_lb} lbf" in values["envelope_conditions"], values["envelope_conditions"]
+            assert (values["envelope_status"] == "safe") == safe
+            expected = (DiagnosticStatus.OK, DiagnosticStatus.WARN) if safe else (DiagnosticStatus.ERROR,)
+            assert statuses[-1].level in expected, statuses[-1].message
+        finally:
+            harness.close()
