@@ -1,7 +1,7 @@
 """H-V envelope throughput: wall time and nodes/s for a full grid with 1 and 2 workers, and where the time goes.
 
-Run: .venv/bin/python bench/envelope_throughput.py [--workers 1,2] [--heights-ft 0:800:41] [--speeds-kt 0:120:25]
-     [--baseline] [--repeat N] [--json]
+Run: .venv/bin/python bench/envelope_throughput.py [--workers 1,2] [--dask-local 2] [--heights-ft 0:800:41]
+     [--speeds-kt 0:120:25] [--overhead-tasks 400] [--baseline] [--repeat N] [--json]
 
 Each run is the complete pipeline of ``helireach envelope compute`` (sweep, cold re-checks, boundary
 refinement) with the default airframe and planner settings; 1 worker runs in this process, more use a
@@ -10,6 +10,12 @@ re-solved cold, solve counts, per-phase wall time; then, from a few sweep column
 how a node's time splits between IPOPT and the rest of ``plan`` (decode + CVODES replay). The machine's
 load average is printed too: other processes on a shared machine slow every number here. ``--json`` also writes
 the numbers to docs/results/data/envelope_throughput.json.
+
+Scaling: every run also prints nodes per core-second (nodes / (wall time × workers)). ``--dask-local N`` adds runs on
+a Dask ``LocalCluster`` of N single-threaded worker processes (the executor of ``envelope compute --dask-local``). The
+executors' own cost per task is measured with ``--overhead-tasks`` tasks that do nothing (submitted as the envelope's
+are, results gathered as they finish) on each executor: per task, what a scheduler adds to a task's solve time; with
+the envelope's task count per phase it bounds what a larger cluster would spend on scheduling.
 
 ``--baseline`` runs, for each worker count, the legacy configuration (legacy sweep: cold restart
 after every not-safe node, every node replayed; the warm-solver options of then; plain CasADi functions; MUMPS; the
@@ -43,12 +49,41 @@ def _baseline_job(job: EnvelopeJob) -> EnvelopeJob:
     )
 
 
-def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float, np.ndarray, dict]:
-    """Computes the envelope with ``workers`` and prints where the time went; returns the wall time, the workers'
-    CPU time, the nodes' statuses and the printed numbers."""
+def _nothing(value: int) -> int:
+    return value
+
+
+def _task_overhead(workers: int, dask_local: bool, tasks: int) -> dict:
+    """Wall time per task of ``tasks`` tasks that do nothing on a fresh executor (start-up not counted): what the
+    executor itself costs per task, printed and returned."""
+    executor = make_executor(None, dask_local=workers) if dask_local else make_executor(workers)
+    try:
+        list(executor.map_unordered(_nothing, [(index,) for index in range(min(tasks, 20))]))  # workers started
+        started = time.perf_counter()
+        results = list(executor.map_unordered(_nothing, [(index,) for index in range(tasks)]))
+        wall = time.perf_counter() - started
+    finally:
+        executor.close()
+    assert sorted(results) == list(range(tasks))
+    per_task_ms = 1e3 * wall / tasks
+    print(
+        f"  executor overhead    {executor.description}: {tasks} empty tasks in {wall:.2f} s, {per_task_ms:.2f} ms "
+        f"per task ({per_task_ms * workers:.2f} ms of worker time per task); load average {loadavg_text()}"
+    )
+    return {
+        "executor": executor.description, "workers": workers, "tasks": tasks, "wall_s": wall,
+        "per_task_ms": per_task_ms, "worker_ms_per_task": per_task_ms * workers,
+    }  # fmt: skip
+
+
+def _run(
+    job: EnvelopeJob, workers: int, label: str = "", *, dask_local: bool = False
+) -> tuple[float, float, np.ndarray, dict]:
+    """Computes the envelope with ``workers`` (local processes, or a Dask LocalCluster) and prints where the time
+    went; returns the wall time, the workers' CPU time, the nodes' statuses and the printed numbers."""
     load_before = os.getloadavg()[0]
     started = time.perf_counter()
-    executor = make_executor(workers)
+    executor = make_executor(None, dask_local=workers) if dask_local else make_executor(workers)
     try:
         envelope = compute_envelope(job, executor)
     finally:
@@ -61,7 +96,13 @@ def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float,
     counts = {name: int((envelope.status == name).sum()) for name in ("safe", "unsafe", "unverified", "failed")}
     phases = ", ".join(f"{name} {seconds:.1f} s" for name, seconds in compute["phases_s"].items())
     print(f"\n{workers} worker(s) [{executor.description}]{label}")
-    print(f"  wall time            {wall:7.1f} s   ({nodes / wall:.1f} nodes/s, {solves / wall:.1f} solves/s)")
+    print(
+        f"  wall time            {wall:7.1f} s   ({nodes / wall:.1f} nodes/s, {solves / wall:.1f} solves/s, "
+        f"{nodes / (wall * workers):.2f} nodes per core-second)"
+    )
+    tasks = compute.get("tasks", {})
+    if tasks:
+        print(f"  tasks                {', '.join(f'{name} {count}' for name, count in tasks.items())}")
     print(f"  phases               {phases}")
     worker_time = ", ".join(
         f"{name} {compute['phase_ipopt_s'].get(name, 0.0):.1f} s IPOPT of {seconds:.1f} s solve+replay"
@@ -95,6 +136,7 @@ def _run(job: EnvelopeJob, workers: int, label: str = "") -> tuple[float, float,
     numbers = {
         "workers": workers, "executor": executor.description, "configuration": label.strip() or "current",
         "nodes": nodes, "wall_s": wall, "nodes_per_s": nodes / wall, "solves_per_s": solves / wall,
+        "nodes_per_core_s": nodes / (wall * workers), "tasks": tasks,
         "phases_s": compute["phases_s"],
         "worker_ipopt_s": compute["phase_ipopt_s"], "worker_solve_and_replay_s": compute["phase_solve_and_replay_s"],
         "worker_cpu_s": sum(cpu.values()), "sweep_cold_solves": sweep_cold,
@@ -145,6 +187,12 @@ def _time_split(job: EnvelopeJob, columns: list[int]) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--workers", default="1,2", help="comma-separated worker counts (default: %(default)s)")
+    parser.add_argument(
+        "--dask-local", default="", help="comma-separated Dask LocalCluster sizes to run too (e.g. 2; default: none)"
+    )
+    parser.add_argument(
+        "--overhead-tasks", type=int, default=400, help="empty tasks per executor for its per-task cost (0: skip)"
+    )
     parser.add_argument("--heights-ft", default=ENVELOPE_GRID.heights_ft)
     parser.add_argument("--speeds-kt", default=ENVELOPE_GRID.speeds_kt)
     parser.add_argument("--airframe", default="uh60a_class")
@@ -193,6 +241,16 @@ def main() -> None:
             "workers": workers, "wall": overall, "wall_per_pair": ratios, "worker_cpu": cpu_ratio,
             "identical_classification": same, "nodes": statuses["current"].size,
         })  # fmt: skip
+    dask_sizes = [int(item) for item in arguments.dask_local.split(",") if item.strip()]
+    for workers in dask_sizes:
+        numbers["runs"].append(_run(job, workers, " Dask", dask_local=True)[3])
+    if arguments.overhead_tasks > 0:
+        print(f"\nper-task cost of the executors ({arguments.overhead_tasks} tasks that do nothing)")
+        pool_sizes = sorted({int(item) for item in arguments.workers.split(",")} - {1})
+        numbers["task_overhead"] = [
+            *(_task_overhead(workers, False, arguments.overhead_tasks) for workers in pool_sizes),
+            *(_task_overhead(workers, True, arguments.overhead_tasks) for workers in dask_sizes),
+        ]
     numbers["time_split"] = _time_split(job, [0, len(job.speeds) // 2, len(job.speeds) - 1])
     if arguments.json:
         record.write(numbers)

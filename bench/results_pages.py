@@ -174,12 +174,15 @@ def envelope_throughput(numbers: Mapping) -> str:
         statuses = ", ".join(f"{count} {name}" for name, count in run["statuses"].items() if count)
         phases = ", ".join(f"{name} {seconds:.1f} s" for name, seconds in run["phases_s"].items())
         rows.append([
-            run["workers"], run["configuration"], _number(run["wall_s"]), _number(run["nodes_per_s"]),
-            _number(run["solves_per_s"]), f"{100 * run['cold_recheck_share']:.1f} %", run["solves"], phases,
+            run["workers"], run.get("executor", ""), run["configuration"], _number(run["wall_s"]),
+            _number(run["nodes_per_s"]), _number(run.get("nodes_per_core_s", run["nodes_per_s"] / run["workers"])),
+            _number(run["solves_per_s"]), f"{100 * run['cold_recheck_share']:.1f} %", run["solves"],
+            ", ".join(f"{name} {count}" for name, count in run.get("tasks", {}).items()), phases,
             _number(run["worker_cpu_s"]), statuses, f"{run['load_1min_before']:.2f} → {run['load_1min_after']:.2f}",
         ])  # fmt: skip
-    header = ["workers", "configuration", "wall s", "nodes/s", "solves/s", "nodes re-solved cold", "solves",
-              "phases (wall)", "worker CPU s", "nodes", "load (1 min)"]  # fmt: skip
+    header = ["workers", "executor", "configuration", "wall s", "nodes/s", "nodes per core-second", "solves/s",
+              "nodes re-solved cold", "solves", "tasks", "phases (wall)", "worker CPU s", "nodes",
+              "load (1 min)"]  # fmt: skip
     text = (
         f"The complete `helireach envelope compute` pipeline (sweep, cold re-checks, boundary refinement) on the "
         f"{numbers['grid']} grid, `{numbers['airframe']}`, {numbers['method']} plans with "
@@ -191,6 +194,14 @@ def envelope_throughput(numbers: Mapping) -> str:
             f"{', '.join(f'{r:.3f}' for r in ratio['wall_per_pair'])}), worker CPU time {ratio['worker_cpu']:.3f}×; "
             f"identical classification at {ratio['identical_classification']} of {ratio['nodes']} nodes."
         )
+    overheads = numbers.get("task_overhead", [])
+    if overheads:
+        intro = "What each executor itself costs per task (tasks that do nothing, start-up not counted):"
+        text += f"\n\n{intro}\n\n" + _table(
+            ["executor", "tasks", "wall s", "ms per task", "worker ms per task"],
+            [[item["executor"], item["tasks"], _number(item["wall_s"]), _number(item["per_task_ms"]),
+              _number(item["worker_ms_per_task"])] for item in overheads],
+        )  # fmt: skip
     split = numbers["time_split"]
     split_rows = [
         [label, _number(split[key]["median"]), _number(split[key]["mean"]),
@@ -472,8 +483,9 @@ PAGES = (
             Section(
                 "envelope_throughput",
                 "Envelope throughput",
-                "Wall time of a full level-flight H-V envelope with 1 and 2 local worker processes (start-up "
-                "included), and how a node's time splits between IPOPT and the rest of a plan.",
+                "Wall time and throughput per core-second of a full level-flight H-V envelope with 1 and 2 local "
+                "worker processes and a Dask LocalCluster (start-up included), what each executor costs per task, "
+                "and how a node's time splits between IPOPT and the rest of a plan.",
                 envelope_throughput,
             ),
         ),

@@ -877,6 +877,7 @@ def compute_envelope(
     started = time.perf_counter()
     last_checkpoint = [time.monotonic()]
     phase_seconds: dict[str, float] = {}
+    phase_tasks: dict[str, int] = {}  # tasks submitted per phase, this run
 
     def summed(name: str) -> dict[str, float]:
         total: dict[str, float] = {}
@@ -890,6 +891,7 @@ def compute_envelope(
         compute = {
             "wall_time_s": round(previous_wall_time_s + time.perf_counter() - started, 3),
             "phases_s": {k: round(v, 3) for k, v in phase_seconds.items()},
+            "tasks": dict(phase_tasks),
             # summed over workers, this run only (a resumed run counts what it computed itself)
             "phase_ipopt_s": summed("phase_solver_seconds"),
             "phase_solve_and_replay_s": summed("phase_point_seconds"),
@@ -915,6 +917,7 @@ def compute_envelope(
     def run_phase(name: str, function, tasks: list[tuple], units: Callable[[Any], int], handle) -> None:
         """Runs ``function`` on tasks (slice index, arguments...); ``handle(state, result)`` takes each result."""
         phase_started = time.perf_counter()
+        phase_tasks[name] = phase_tasks.get(name, 0) + len(tasks)
         progress.start(name, sum(units(arguments) for _, *arguments in tasks))
         try:
             for index, result in executor.map_unordered(
