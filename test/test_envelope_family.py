@@ -175,3 +175,44 @@ def test_the_status_node_answers_from_the_member_of_todays_weight(family_folder:
             assert statuses[-1].level in expected, statuses[-1].message
         finally:
             harness.close()
+
+
+@pytest.mark.system
+def test_the_cockpit_draws_the_family_member_the_status_answers_from(family_folder: Path, no_ros_discovery) -> None:
+    """A display given the family draws its heaviest, highest member until a safety status names the members it
+    answers from; then that member (labelled with its conditions), pushed to the open page."""
+    import asyncio
+
+    import aiohttp
+    from test_display import RosHarness, frame_until, read_frame, status_message, websocket_url
+
+    family = EnvelopeFamily.load(family_folder)
+    light = family.at(15000 * LBF, 0.0)
+    between = family.at(15500 * LBF, 1500 * FT)
+    harness = RosHarness(envelope_file=str(family_folder))
+    try:
+
+        async def scenario() -> tuple[dict, dict, dict]:
+            async with aiohttp.ClientSession() as http, http.ws_connect(websocket_url(harness.display)) as socket:
+                first = (await read_frame(socket))["envelope"]
+                frames = []
+                for view in (light, between):
+                    status = status_message(DiagnosticStatus.OK, "SAFE", 120.0, 20.0, 30.0, view.envelope_id)
+                    harness.vehicle.status_publisher.publish(status)
+                    frame = await frame_until(
+                        socket,
+                        lambda frame, view=view: frame.get("envelope", {}).get("envelope_id") == view.envelope_id,
+                        f"the diagram of {view.conditions}",
+                    )
+                    frames.append(frame["envelope"])
+                return first, frames[0], frames[1]
+
+        first, drawn_light, drawn_between = asyncio.run(scenario())
+        assert first["available"] and first["conditions"] == "16000 lbf, DA 3000 ft"
+        assert drawn_light["conditions"] == "15000 lbf, DA 0 ft"
+        light_member = light.members[0][1]
+        assert np.array_equal(np.asarray(drawn_light["status"]) == 0, light_member.status == "safe")
+        assert not np.array_equal(np.asarray(first["status"]) == 0, light_member.status == "safe")
+        assert drawn_between["conditions"] == "16000 lbf, DA 3000 ft (worst of 4)"
+    finally:
+        harness.close()

@@ -179,6 +179,25 @@ class _Latest:
     versions: dict[str, int] = field(default_factory=lambda: {"config": 1, "envelope": 1, "plan": 1})
 
 
+def _safe_masks(envelope: Any) -> np.ndarray:
+    """One safe mask per climb slice (a 2-D envelope has one)."""
+    safe = np.asarray(envelope.status) == "safe"
+    return safe if envelope.is_3d else safe[None]
+
+
+def _most_restrictive(members: Any) -> tuple[Any, Any]:
+    """Of family members, the heaviest at the highest density altitude (calm first): the one to draw when it is not
+    known which answers, or for several answering together."""
+    return max(members, key=lambda item: (-abs(item[0].headwind), item[0].gross_weight, item[0].density_altitude))
+
+
+def _family_section(envelope: Any, conditions: str, envelope_id: str) -> dict[str, Any]:
+    """The diagram of a family member, labelled with its conditions and the id the status reports."""
+    section = envelope_section(envelope.slice(envelope.nearest_slice(0.0)))
+    section.update(envelope_id=envelope_id, conditions=conditions)
+    return section
+
+
 class CockpitDisplay(Node):
     """Serves the cockpit page and pushes the latest helireach data to it (read-only).
 
@@ -207,6 +226,7 @@ class CockpitDisplay(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         self._state_topic = state_topic
+        self._family: Any | None = None  # an envelope family (envelope_file a family's folder): its members drawn
         envelope, envelope_data = self._load_envelope()
         self._envelope_id = envelope_data.get("envelope_id")
         self._envelope = envelope
@@ -214,8 +234,7 @@ class CockpitDisplay(Node):
         # nearest slice, the drawn diagram is the level-flight slice
         self._envelope_safe: np.ndarray | None = None
         if envelope is not None:
-            safe = np.asarray(envelope.status) == "safe"
-            self._envelope_safe = safe if envelope.is_3d else safe[None]
+            self._envelope_safe = _safe_masks(envelope)
         self._config = self._config_section(envelope, envelope_data)
         limits = self._touchdown_limits or {}
         self._latest.touchdown_from_state = TouchdownFromState(
@@ -291,15 +310,22 @@ class CockpitDisplay(Node):
 
     # -- envelope and airframe ---------------------------------------------------------------------------
     def _load_envelope(self) -> tuple[Any, dict[str, Any]]:
-        """Loads the envelope for the diagram; any failure gives an 'unavailable' section and a logged error."""
+        """Loads the envelope for the diagram; any failure gives an 'unavailable' section and a logged error. A family
+        draws its heaviest, highest member until a safety status names the members it answers from."""
         path = self._envelope_file or "(shipped envelope)"
         try:
             from helireach_ros.core.envelope import data as envelope_module
+            from helireach_ros.core.envelope.family import EnvelopeFamily, is_family
 
             path = self._envelope_file or str(envelope_module.default_envelope_path())
-            envelope = envelope_module.load_envelope(path)
-            section = envelope_section(envelope.slice(envelope.nearest_slice(0.0)))  # the level-flight diagram
-            section["envelope_id"] = str(envelope.envelope_id)  # the file's, as the status node reports it
+            if is_family(path):
+                self._family = EnvelopeFamily.load(path)
+                member, envelope = _most_restrictive(self._family.members)
+                section = _family_section(envelope, member.conditions, envelope.envelope_id)
+            else:
+                envelope = envelope_module.load_envelope(path)
+                section = envelope_section(envelope.slice(envelope.nearest_slice(0.0)))  # the level-flight diagram
+                section["envelope_id"] = str(envelope.envelope_id)  # the file's, as the status node reports it
         except Exception as error:  # missing module, missing/corrupt file: the page shows NO DATA, node runs on
             reason = f"{type(error).__name__}: {error}"
             if str(path) not in reason:
@@ -398,13 +424,32 @@ class CockpitDisplay(Node):
 
     def _on_safety_status(self, message: DiagnosticStatus) -> None:
         content = safety_status_section(message)
+        drawn = self._family_member_for(content.get("envelope_id"))
 
         def update(latest: _Latest, now: float) -> None:
             latest.status = _Received(content, now)
             if content["level"] != "nodata":
                 latest.last_known_banner = content["level"]
+            if drawn is not None:
+                self._envelope, self._envelope_safe, self._envelope_json, self._envelope_id = drawn
+                latest.versions["envelope"] += 1
 
         self._store(update)
+
+    def _family_member_for(self, envelope_id: Any) -> tuple[Any, np.ndarray, str, str] | None:
+        """With a family: the member to draw for a status answering from the members ``envelope_id`` names (their
+        ids joined by ``+``; the heaviest, highest of them), as (envelope, safe masks, section JSON, the status's id);
+        None when it is the one drawn, or names no member."""
+        if self._family is None or not envelope_id or envelope_id == self._envelope_id:
+            return None
+        named = set(str(envelope_id).split("+"))
+        members = [(member, envelope) for member, envelope in self._family.members if envelope.envelope_id in named]
+        if not members:
+            return None
+        member, envelope = _most_restrictive(members)
+        conditions = member.conditions if len(members) == 1 else f"{member.conditions} (worst of {len(members)})"
+        section = _family_section(envelope, conditions, str(envelope_id))
+        return envelope, _safe_masks(envelope), to_json({**section, "file": self._envelope_file}), str(envelope_id)
 
     def _on_state(self, message: Odometry) -> None:
         reading = rm.read_odometry(message)

@@ -483,6 +483,7 @@
     let label = "no envelope";
     if (envelope && envelope.available) {
       label = `envelope ${envelope.envelope_id}` + (envelope.method ? ` \u00b7 ${envelope.method}` : "");
+      if (envelope.conditions) label += ` \u00b7 ${envelope.conditions}`; // a family member's weight and altitude
       if (isNum(envelope.power_fraction)) label += ` \u00b7 power ${fmt(100 * envelope.power_fraction)} %`;
     } else if (envelope) {
       label = "envelope unavailable";
