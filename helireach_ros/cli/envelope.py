@@ -257,7 +257,18 @@ def _compute(arguments: argparse.Namespace) -> int:
         executor = make_executor(arguments.workers, arguments.scheduler, arguments.dask_local)
     except (ValueError, OSError) as error:
         return _error(f"cannot start the workers: {error}")
-    family = None if len(paths) == 1 and paths[0] == out else _FamilyIndexWriter(out, jobs, paths, command)
+    family = None
+    if not (len(paths) == 1 and paths[0] == out):  # a sweep into a folder: the family index beside its members
+        from helireach_ros.core.envelope.family import FamilyIndexWriter, FamilyMember
+
+        members = [
+            FamilyMember(
+                file=path.name, gross_weight=job.airframe.gross_weight, density_altitude=job.airframe.density_altitude,
+                headwind=job.airframe.headwind, power_fraction=job.power_fraction,
+            )
+            for job, path in zip(jobs, paths, strict=True)
+        ]  # fmt: skip
+        family = FamilyIndexWriter(out, jobs[0].airframe.name, members, command)
     try:
         for index, (job, path) in enumerate(zip(jobs, paths, strict=True)):
             label = f"[{index + 1}/{len(jobs)}] " if len(jobs) > 1 else ""
@@ -283,7 +294,7 @@ def _compute(arguments: argparse.Namespace) -> int:
                 save_envelope(envelope, path)
                 _print_robust(path, envelope)
             if family is not None:
-                family.completed(index, path, envelope.envelope_id)
+                family.completed(index, envelope.envelope_id)
             counts = {name: int((envelope.status == name).sum()) for name in STATUS_CODES}
             compute = envelope.metadata.get("compute", {})
             print(
@@ -300,45 +311,6 @@ def _compute(arguments: argparse.Namespace) -> int:
     finally:
         executor.close()
     return 0
-
-
-class _FamilyIndexWriter:
-    """The family index of a sweep's folder (core/envelope/family.py): written before the first member, rewritten as
-    each completes; a resumed sweep keeps the members it finds complete."""
-
-    def __init__(self, folder: Path, jobs: list, paths: list[Path], command: str | None) -> None:
-        from helireach_ros.core.envelope.family import FamilyMember, read_family_index, write_family_index
-
-        folder.mkdir(parents=True, exist_ok=True)
-        self._folder, self._command, self._write = folder, command, write_family_index
-        self._airframe = jobs[0].airframe.name
-        previous = {}
-        if (folder / "family.json").is_file():
-            try:
-                previous = {member.file: member for member in read_family_index(folder)[1]}
-            except Exception:  # an unreadable index is rewritten from what the sweep knows
-                previous = {}
-        self.members = []
-        for job, path in zip(jobs, paths, strict=True):
-            member = FamilyMember(
-                file=path.name, gross_weight=job.airframe.gross_weight, density_altitude=job.airframe.density_altitude,
-                headwind=job.airframe.headwind, power_fraction=job.power_fraction,
-            )  # fmt: skip
-            kept = previous.get(path.name)
-            if kept is not None and kept.complete and path.is_file():
-                member = kept
-            self.members.append(member)
-        write_family_index(folder, self._airframe, self.members, command)
-
-    def completed(self, index: int, path: Path, envelope_id: str) -> None:
-        import dataclasses
-
-        from helireach_ros.core.envelope.family import file_sha256
-
-        self.members[index] = dataclasses.replace(
-            self.members[index], complete=True, sha256=file_sha256(path), envelope_id=envelope_id
-        )
-        self._write(self._folder, self._airframe, self.members, self._command)
 
 
 def _robust_job_factory(arguments: argparse.Namespace):

@@ -22,6 +22,7 @@ nearest member.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -39,6 +40,7 @@ __all__ = [
     "FAMILY_INDEX",
     "ConditionedEnvelope",
     "EnvelopeFamily",
+    "FamilyIndexWriter",
     "FamilyMember",
     "family_member_path",
     "file_sha256",
@@ -53,6 +55,7 @@ _FORMAT_VERSION = 1
 _WEIGHT_TOLERANCE = 0.5  # N: conditions this close to a member's are that member's
 _ALTITUDE_TOLERANCE = 0.5  # m
 _WIND_TOLERANCE = 0.05  # m/s
+_MAX_VIEWS = 64  # conditions whose view is kept (a status node asks again at the same ones)
 _STATUS_RANK = {"safe": 0}  # every other status is "not safe"; among those the smaller margin is the worse
 
 
@@ -141,6 +144,38 @@ def write_family_index(
     temporary.write_text(json.dumps(document, indent=1) + "\n")
     os.replace(temporary, path)
     return path
+
+
+class FamilyIndexWriter:
+    """Keeps a sweep's family index: written before the first member is computed, rewritten as each completes. A
+    resumed sweep keeps the members the folder's index already lists as complete (their files untouched)."""
+
+    def __init__(
+        self, folder: str | os.PathLike[str], airframe_name: str, members: Sequence[FamilyMember], command: str | None
+    ) -> None:
+        self._folder, self._airframe_name, self._command = Path(folder), airframe_name, command
+        self._folder.mkdir(parents=True, exist_ok=True)
+        previous: dict[str, FamilyMember] = {}
+        if (self._folder / FAMILY_INDEX).is_file():
+            try:
+                previous = {member.file: member for member in read_family_index(self._folder)[1]}
+            except EnvelopeError:  # an unreadable index is rewritten from what the sweep knows
+                previous = {}
+        self.members = [
+            previous[member.file]
+            if member.file in previous and previous[member.file].complete and (self._folder / member.file).is_file()
+            else member
+            for member in members
+        ]
+        write_family_index(self._folder, airframe_name, self.members, command)
+
+    def completed(self, index: int, envelope_id: str) -> None:
+        """Records member ``index`` as complete (its file final: SHA-256 taken now) and rewrites the index."""
+        member = self.members[index]
+        self.members[index] = dataclasses.replace(
+            member, complete=True, sha256=file_sha256(self._folder / member.file), envelope_id=envelope_id
+        )
+        write_family_index(self._folder, self._airframe_name, self.members, self._command)
 
 
 def read_family_index(path: str | os.PathLike[str]) -> tuple[str, tuple[FamilyMember, ...], str | None]:
@@ -357,6 +392,8 @@ class EnvelopeFamily:
             if member.headwind == winds[0] and member.gross_weight in weights and member.density_altitude in altitudes
         ]
         view = ConditionedEnvelope(chosen, wanted)
+        if len(self._views) >= _MAX_VIEWS:  # conditions that vary (an estimated weight) must not grow it for ever
+            self._views.clear()
         self._views[key] = view
         return view
 
