@@ -178,8 +178,6 @@ class FlyableTranscription(VerifiedTranscription):
         # to (variable_bounds). Given to every plan, the first interval's room was what the closed loop flew:
         # re-planned every 0.25 s, it rode the true limit and crossed it with a 5 % model error.
         first_interval = [self.state_index(point, 2) for point in range(settings.degree)]  # Ω in interval 1
-        state_high_above_line = state_high.copy()
-        state_high_above_line[first_interval] = airframe.limits.max_rotor_speed_ratio * omega0 / self.state_scale[2]
         control_low, control_high = self.scaled_control_bounds(intervals)
         # θ(T) inside the window by a margin: the replay's contact can come a little before T, where θ is on
         # its way from the flare attitude (at 20 deg/s, 0.5 deg is 25 ms of margin).
@@ -190,10 +188,11 @@ class FlyableTranscription(VerifiedTranscription):
         slack_high = -settings.footprint_margin if settings.objective in FOOTPRINT_OBJECTIVES else 1e3
         self.lbx = np.concatenate([[settings.min_time_to_land / _TIME_SCALE, -10.0], control_low, state_low])
         self.ubx = np.concatenate([[settings.max_time_to_land / _TIME_SCALE, slack_high], control_high, state_high])
-        self._ubx_above_line = np.concatenate(
-            [[settings.max_time_to_land / _TIME_SCALE, slack_high], control_high, state_high_above_line]
+        self._ubx_above_line = self.ubx.copy()
+        states_start = self.ubx.size - state_high.size
+        self._ubx_above_line[states_start + np.asarray(first_interval)] = (
+            airframe.limits.max_rotor_speed_ratio * omega0 / self.state_scale[2]
         )
-        self._rotor_line = (airframe.limits.max_rotor_speed_ratio - settings.rotor_speed_backoff) * omega0
 
     def _path_margins(self, *, rotor_ratio, floor, ceiling_backoff, touchdown_pitch) -> list:
         """The reach-avoid value's path and touchdown margins, each 0 at its limit (as the NLP holds it, back-off
@@ -246,7 +245,7 @@ class FlyableTranscription(VerifiedTranscription):
         .. math:: \\Omega_k \\le \\begin{cases} \\Omega_{max} & k \\in \\text{interval 1 and } \\Omega(0) >
             \\Omega_{max} - b\\,\\Omega_0 \\\\ \\Omega_{max} - b\\,\\Omega_0 & \\text{otherwise} \\end{cases}
         """
-        above_line = float(parameter[StateIndex.ROTOR_SPEED]) > self._rotor_line
+        above_line = float(parameter[StateIndex.ROTOR_SPEED]) > self.state_upper[StateIndex.ROTOR_SPEED]
         return self.lbx, self._ubx_above_line if above_line else self.ubx
 
     def initial_guess(self, initial_state: np.ndarray) -> np.ndarray:
