@@ -1,129 +1,150 @@
-"""How an envelope's cost grows with resolution, and what a refinement that follows the boundary would save and miss.
+"""How an envelope's cost grows with resolution, and what boundary-following refinement saves and changes.
 
-Run: nice -n 10 .venv/bin/python bench/envelope_resolution.py [--resolutions 21x13 41x25 81x49] [--workers 2] [--json]
+Run: nice -n 10 .venv/bin/python bench/envelope_resolution.py [--resolutions 21x13 41x25 81x49] [--levels 1 2]
+     [--resolutions-3d 41x25] [--climb-rates-fpm=-2000,-1500,-1000,-500,0,750,1500] [--workers 2] [--json]
 
 For each grid (heights 0-800 ft x speeds 0-120 kt, level flight, the default airframe and settings) the complete
-``helireach envelope compute`` pipeline runs on local worker processes (the brute-force grid): wall time and solves.
-Each grid doubles the one before per axis (2n - 1 nodes), so every node of the coarser grid is a node of the finer.
-Between consecutive grids it measures what a coarse pass plus refinement would do: solve the coarse grid, then only
-the fine nodes inside coarse cells whose four corners disagree (safe against not safe), and give every other fine
-node the status its coarse cell's corners agree on. Printed against the brute-force fine grid: the solves that
-would take (coarse solves + the fine grid's solves per node x those nodes), and every fine node whose inferred
-status differs from the brute force, split into *towards safe* (inferred safe, brute force not: an optimistic miss
-that a refinement must never make) and *towards not safe*. ``--json`` writes
-docs/results/data/envelope_resolution.json.
+``helireach envelope compute`` pipeline runs on local worker processes: the full grid (brute force), then the same
+grid refined over each of ``--levels`` (``EnvelopeJob.refine_levels``; :mod:`helireach_ros.core.envelope.refinement`)
+where the grid's counts allow it. ``--resolutions-3d`` adds 3-D grids on the shipped file's climb-rate axis
+(``--climb-rates-fpm``, refined per climb slice). Each refined envelope is compared with its full grid node by node:
+its solves (sweep, cold re-checks, interior solves and boundary bisection), IPOPT seconds summed over workers and
+wall time as ratios to the full grid's in the same run, and every status that differs, split into *towards safe on
+the node's own replay-verified plan* (the full grid's plan for that node did not verify; the refined interior solve's
+did), *towards safe without one* (an optimistic miss the refinement must never make) and *towards not safe*.
+``--json`` writes docs/results/data/envelope_resolution.json.
 """
 
 from __future__ import annotations
 
 import argparse
-import itertools
+import dataclasses
 
 import numpy as np
 from _common import Record, add_json_argument, loadavg_text, machine_text
 
 from helireach_ros.core.aircraft.airframe import load_airframe
 from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
+from helireach_ros.core.envelope.grid import parse_list
+from helireach_ros.core.envelope.refinement import REFINEMENT_ARRAY, NodeOrigin, check_refinable
 from helireach_ros.core.envelope.workers import make_executor
 from helireach_ros.core.ocp.settings import load_settings
 from helireach_ros.core.units import FT, KT
 
+SHIPPED_CLIMB_RATES_FPM = "-2000,-1500,-1000,-500,0,750,1500"
+
 
 def _solves(envelope) -> int:
     counters = envelope.metadata["compute"]["counters"]
-    return int(counters["sweep_solves"] + counters["cold_rechecks"] + counters["bisection_solves"])
+    return int(sum(counters.get(name, 0) for name in (
+        "sweep_solves", "cold_rechecks", "bisection_solves", "interior_solves")))  # fmt: skip
 
 
-def _refinement(coarse, fine, fine_solves: int, coarse_solves: int) -> dict:
-    """What a coarse pass plus refinement inside the coarse cells whose corners disagree would solve and miss."""
-    coarse_safe = coarse.status == "safe"
-    fine_safe = fine.status == "safe"
-    rows, columns = coarse_safe.shape
-    solved = np.zeros(fine_safe.shape, dtype=bool)
-    solved[::2, ::2] = True  # the coarse nodes
-    inferred = np.full(fine_safe.shape, -1, dtype=np.int8)  # 1 safe, 0 not safe, -1 solved
-    for row in range(rows - 1):
-        for column in range(columns - 1):
-            corners = coarse_safe[row : row + 2, column : column + 2]
-            cell = (slice(2 * row, 2 * row + 3), slice(2 * column, 2 * column + 3))
-            if corners.all() or not corners.any():  # cells that share nodes share their corners' statuses
-                inferred[cell] = np.int8(corners.all())
-            else:
-                solved[cell] = True
-    inferred[solved] = -1
-    refined_nodes = int(solved.sum())
-    towards_safe = (inferred == 1) & ~fine_safe
-    towards_not_safe = (inferred == 0) & fine_safe
-    per_node = fine_solves / fine_safe.size
-    coarse_nodes = coarse_safe.size
-    estimated = coarse_solves + per_node * (refined_nodes - coarse_nodes)
+def _ipopt_s(envelope) -> float:
+    return float(sum(envelope.metadata["compute"]["phase_ipopt_s"].values()))
 
-    def listed(mask: np.ndarray) -> list[dict]:
-        return [
-            {"height_ft": float(fine.heights[r] / FT), "speed_kt": float(fine.speeds[c] / KT),
-             "brute_force": str(fine.status[r, c])}
-            for r, c in zip(*np.nonzero(mask), strict=True)
-        ]  # fmt: skip
 
-    return {
-        "coarse": f"{rows}x{columns}", "fine": f"{fine_safe.shape[0]}x{fine_safe.shape[1]}",
-        "fine_nodes_solved": refined_nodes, "fine_nodes": int(fine_safe.size),
-        "estimated_solves": estimated, "brute_force_solves": fine_solves,
-        "solve_ratio": estimated / fine_solves,
-        "towards_safe": listed(towards_safe), "towards_not_safe": listed(towards_not_safe),
+def _differences(full, refined) -> dict:
+    """Every node whose status differs, by direction, with where it is and how the refined node got its answer."""
+    origin = refined.arrays[REFINEMENT_ARRAY]
+    verified = refined.arrays["verified"]
+    listed: dict[str, list] = {"towards_safe_verified": [], "towards_safe_unverified": [], "towards_not_safe": []}
+    for node in zip(*np.nonzero(full.status != refined.status), strict=True):
+        entry = {
+            "height_ft": round(float(full.heights[node[-2]] / FT), 1),
+            "speed_kt": round(float(full.speeds[node[-1]] / KT), 2),
+            "full": str(full.status[node]), "refined": str(refined.status[node]),
+            "origin": NodeOrigin(int(origin[node])).name.lower(),
+        }  # fmt: skip
+        if full.is_3d:
+            entry["climb_fpm"] = round(float(full.climb_rates[node[0]] / (FT / 60.0)))
+        if refined.status[node] == "safe":
+            listed["towards_safe_verified" if verified[node] else "towards_safe_unverified"].append(entry)
+        else:
+            listed["towards_not_safe"].append(entry)
+    return listed
+
+
+def _compute(job: EnvelopeJob, workers: int):
+    executor = make_executor(workers)
+    try:
+        envelope = compute_envelope(job, executor)
+    finally:
+        executor.close()
+    counts = {name: int((envelope.status == name).sum()) for name in ("safe", "unsafe", "unverified", "failed")}
+    if envelope.is_3d:
+        counts["no_trim"] = int((envelope.status == "no_trim").sum())
+    return envelope, {
+        "nodes": int(envelope.status.size), "solves": _solves(envelope), "ipopt_s": round(_ipopt_s(envelope), 1),
+        "wall_s": float(envelope.metadata["compute"]["wall_time_s"]), "statuses": counts, "load": loadavg_text(),
     }  # fmt: skip
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--resolutions", nargs="+", default=["21x13", "41x25", "81x49"], help="HEIGHTSxSPEEDS")
+    parser.add_argument("--resolutions", nargs="*", default=["21x13", "41x25", "81x49"], help="HEIGHTSxSPEEDS, 2-D")
+    parser.add_argument("--resolutions-3d", nargs="*", default=["41x25"], help="HEIGHTSxSPEEDS, 3-D")
+    parser.add_argument("--climb-rates-fpm", default=SHIPPED_CLIMB_RATES_FPM, help="the 3-D grids' climb axis")
+    parser.add_argument("--levels", nargs="+", type=int, default=[1, 2], help="refinement levels to compare")
     parser.add_argument("--workers", type=int, default=2)
     add_json_argument(parser)
     arguments = parser.parse_args()
     record = Record.start()
     airframe, settings = load_airframe("uh60a_class"), load_settings()
-    print(f"envelope cost against resolution: {airframe.name}, level flight, 0-800 ft x 0-120 kt; {machine_text()}")
+    climb_rates = tuple(rate * FT / 60.0 for rate in parse_list(arguments.climb_rates_fpm, "--climb-rates-fpm"))
+    print(f"envelope cost against resolution: {airframe.name}, 0-800 ft x 0-120 kt; {machine_text()}")
     print(f"command: {record.command}; load average {record.load_before}")
-    grids, numbers = [], {"airframe": airframe.name, "workers": arguments.workers, "grids": [], "refinements": []}
-    for resolution in arguments.resolutions:
+    numbers: dict = {"airframe": airframe.name, "workers": arguments.workers, "grids": [],
+                     "climb_rates_fpm": arguments.climb_rates_fpm}  # fmt: skip
+    grids = [(resolution, None) for resolution in arguments.resolutions]
+    grids += [(resolution, climb_rates) for resolution in arguments.resolutions_3d]
+    for resolution, climbs in grids:
         heights_count, speeds_count = (int(part) for part in resolution.split("x"))
         job = EnvelopeJob(
             airframe, settings, 0.0,
             tuple(np.linspace(0.0, 800.0, heights_count) * FT), tuple(np.linspace(0.0, 120.0, speeds_count) * KT),
+            climb_rates=climbs,
         )  # fmt: skip
-        executor = make_executor(arguments.workers)
-        try:
-            envelope = compute_envelope(job, executor)
-        finally:
-            executor.close()
-        wall = float(envelope.metadata["compute"]["wall_time_s"])
-        solves = _solves(envelope)
-        counts = {name: int((envelope.status == name).sum()) for name in ("safe", "unsafe", "unverified", "failed")}
-        nodes = envelope.status.size
+        label = f"{resolution}{'' if climbs is None else f'x{len(climbs)} (3-D)'}"
+        full, entry = _compute(job, arguments.workers)
+        entry |= {"resolution": label, "refined": []}
         print(
-            f"  {resolution:>7}: {nodes:5d} nodes, {solves:5d} solves ({solves / nodes:.2f} per node), {wall:6.1f} s "
-            f"wall on {arguments.workers} workers; {counts}; load {loadavg_text()}"
+            f"  {label:>14} full grid: {entry['nodes']:5d} nodes, {entry['solves']:5d} solves "
+            f"({entry['solves'] / entry['nodes']:.2f} per node), IPOPT {entry['ipopt_s']:.0f} s, wall "
+            f"{entry['wall_s']:.0f} s on {arguments.workers} workers; {entry['statuses']}; load {entry['load']}"
         )
-        numbers["grids"].append({
-            "resolution": resolution, "nodes": int(envelope.status.size), "solves": solves, "wall_s": wall,
-            "statuses": counts, "load": loadavg_text(),
-        })  # fmt: skip
-        grids.append((envelope, solves))
-    for (coarse, coarse_solves), (fine, fine_solves) in itertools.pairwise(grids):
-        if (fine.status.shape[0] - 1) != 2 * (coarse.status.shape[0] - 1) or (fine.status.shape[1] - 1) != 2 * (
-            coarse.status.shape[1] - 1
-        ):
-            continue
-        result = _refinement(coarse, fine, fine_solves, coarse_solves)
-        numbers["refinements"].append(result)
-        print(
-            f"  refine {result['coarse']} -> {result['fine']}: {result['fine_nodes_solved']} of {result['fine_nodes']} "
-            f"fine nodes solved, ~{result['estimated_solves']:.0f} solves against {result['brute_force_solves']} "
-            f"({result['solve_ratio']:.2f}x); inferred statuses that differ: {len(result['towards_safe'])} towards "
-            f"safe, {len(result['towards_not_safe'])} towards not safe"
-        )
-        for miss in result["towards_safe"]:
-            print(f"      towards safe: {miss['height_ft']:.0f} ft {miss['speed_kt']:.0f} kt ({miss['brute_force']})")
+        for levels in arguments.levels:
+            try:
+                check_refinable((heights_count, speeds_count), levels)
+            except ValueError:
+                continue
+            refined, refined_entry = _compute(dataclasses.replace(job, refine_levels=levels), arguments.workers)
+            counters = refined.metadata["compute"]["counters"]
+            refined_entry |= {
+                "levels": levels,
+                "solve_ratio": refined_entry["solves"] / entry["solves"],
+                "ipopt_ratio": refined_entry["ipopt_s"] / entry["ipopt_s"],
+                "wall_ratio": refined_entry["wall_s"] / entry["wall_s"],
+                "interior_solves": int(counters["interior_solves"]),
+                "interior_kept": int(counters["interior_kept"]),
+                "inferred_unsafe_nodes": int(counters["inferred_unsafe_nodes"]),
+                **_differences(full, refined),
+            }
+            entry["refined"].append(refined_entry)
+            print(
+                f"  {label:>14} {levels} level(s): {refined_entry['solves']:5d} solves "
+                f"({refined_entry['solve_ratio']:.2f}x), IPOPT {refined_entry['ipopt_s']:.0f} s "
+                f"({refined_entry['ipopt_ratio']:.2f}x), wall {refined_entry['wall_s']:.0f} s "
+                f"({refined_entry['wall_ratio']:.2f}x); interior {refined_entry['interior_kept']} of "
+                f"{refined_entry['interior_solves']} kept, {refined_entry['inferred_unsafe_nodes']} inferred unsafe; "
+                f"differ: {len(refined_entry['towards_safe_verified'])} towards safe on their own verified plan, "
+                f"{len(refined_entry['towards_safe_unverified'])} towards safe without, "
+                f"{len(refined_entry['towards_not_safe'])} towards not safe; load {refined_entry['load']}"
+            )
+            for key in ("towards_safe_verified", "towards_safe_unverified", "towards_not_safe"):
+                for node in refined_entry[key]:
+                    print(f"      {key}: {node}")
+        numbers["grids"].append(entry)
     print(f"load average after: {loadavg_text()}")
     if arguments.json:
         record.write(numbers)

@@ -218,40 +218,56 @@ def envelope_throughput(numbers: Mapping) -> str:
 
 
 def envelope_resolution(numbers: Mapping) -> str:
-    grid_rows = [
-        [grid["resolution"], grid["nodes"], grid["solves"], _number(grid["solves"] / grid["nodes"], 2),
-         _number(grid["wall_s"]), ", ".join(f"{count} {name}" for name, count in grid["statuses"].items() if count),
-         grid["load"]]
-        for grid in numbers["grids"]
-    ]  # fmt: skip
-    text = (
-        f"The brute-force grid, heights 0–800 ft × speeds 0–120 kt, level flight, `{numbers['airframe']}`, on "
-        f"{numbers['workers']} local worker processes; each grid doubles the one before per axis.\n\n"
-        + _table(["grid", "nodes", "solves", "solves per node", "wall s", "statuses", "load (1/5/15 min)"], grid_rows)
-    )
-    rows = []
-    for refinement in numbers["refinements"]:
-        misses = ", ".join(
-            f"{miss['height_ft']:.0f} ft / {miss['speed_kt']:.0f} kt ({miss['brute_force']})"
-            for miss in refinement["towards_safe"]
+    def statuses(entry: Mapping) -> str:
+        return ", ".join(f"{count} {name}" for name, count in entry["statuses"].items() if count)
+
+    def nodes(listed: list) -> str:
+        return "; ".join(
+            (f"{node['climb_fpm']} ft/min " if "climb_fpm" in node else "")
+            + f"{node['height_ft']:g} ft / {node['speed_kt']:g} kt ({node['full']} → {node['refined']})"
+            for node in listed
         )
+
+    rows, changes = [], []
+    for grid in numbers["grids"]:
         rows.append([
-            f"{refinement['coarse']} → {refinement['fine']}",
-            f"{refinement['fine_nodes_solved']} of {refinement['fine_nodes']}",
-            f"{refinement['estimated_solves']:.0f} of {refinement['brute_force_solves']}",
-            f"{refinement['solve_ratio']:.2f}×", len(refinement["towards_not_safe"]),
-            f"{len(refinement['towards_safe'])}" + (f": {misses}" if misses else ""),
+            grid["resolution"], "full grid", grid["nodes"], grid["solves"], _number(grid["solves"] / grid["nodes"], 2),
+            _number(grid["ipopt_s"]), _number(grid["wall_s"]), statuses(grid), "", grid["load"],
         ])  # fmt: skip
-    if rows:
-        text += (
-            "\n\nA coarse pass, then only the fine nodes inside coarse cells whose corners disagree (safe against not "
-            "safe); every other fine node given the status its cell's corners agree on, against the brute-force fine "
-            "grid:\n\n"
-        )
-        header = ["refinement", "fine nodes solved", "solves (estimated)", "ratio", "differ towards not safe",
-                  "differ towards safe"]  # fmt: skip
-        text += _table(header, rows)
-    return text
+        for refined in grid["refined"]:
+            differ = (
+                f"{len(refined['towards_safe_verified'])} towards safe on their own verified plan, "
+                f"{len(refined['towards_safe_unverified'])} towards safe without, "
+                f"{len(refined['towards_not_safe'])} towards not safe"
+            )
+            rows.append([
+                grid["resolution"], f"refined, {refined['levels']} level{'s' if refined['levels'] > 1 else ''}",
+                refined["nodes"], f"{refined['solves']} ({refined['solve_ratio']:.2f}×)",
+                _number(refined["solves"] / refined["nodes"], 2),
+                f"{_number(refined['ipopt_s'])} ({refined['ipopt_ratio']:.2f}×)",
+                f"{_number(refined['wall_s'])} ({refined['wall_ratio']:.2f}×)", statuses(refined), differ,
+                refined["load"],
+            ])  # fmt: skip
+            for key, text in (
+                ("towards_safe_verified", "towards safe, each on its own replay-verified plan"),
+                ("towards_safe_unverified", "towards safe without a verified plan"),
+                ("towards_not_safe", "towards not safe"),
+            ):
+                if refined[key]:
+                    changes.append(
+                        f"- {grid['resolution']}, {refined['levels']} level(s), {text}: {nodes(refined[key])}."
+                    )
+    header = ["grid", "computed", "nodes", "solves", "solves per node", "IPOPT s (summed)", "wall s", "statuses",
+              "statuses that differ from the full grid", "load (1/5/15 min)"]  # fmt: skip
+    return (
+        f"Heights 0–800 ft × speeds 0–120 kt, `{numbers['airframe']}`, on {numbers['workers']} local worker "
+        "processes; each grid doubles the one before per axis; 3-D grids on the shipped file's climb axis "
+        f"({numbers['climb_rates_fpm']} ft/min). *Refined*: `helireach envelope compute --refine-levels L` "
+        "(boundary-following refinement, [envelopes.md](../method/envelopes.md#boundary-following-refinement)); "
+        "ratios against the full grid of the same run.\n\n"
+        + _table(header, rows)
+        + ("\n\nStatuses that differ:\n\n" + "\n".join(changes) if changes else "")
+    )
 
 
 def closed_loop_latency(numbers: Mapping) -> str:
@@ -528,9 +544,9 @@ PAGES = (
             Section(
                 "envelope_resolution",
                 "Envelope cost against resolution",
-                "How the brute-force envelope's solves and wall time grow when the grid doubles per axis, and what a "
-                "coarse pass refined only where its cells' corners disagree would solve and miss, measured against "
-                "the brute-force grid.",
+                "How the full grid's solves and wall time grow when the grid doubles per axis, and what "
+                "boundary-following refinement computes instead: its solves, time and every status that differs "
+                "from the full grid.",
                 envelope_resolution,
             ),
         ),

@@ -71,6 +71,22 @@ def assert_same_results(first: Envelope, second: Envelope) -> None:
     assert different == []
 
 
+def interrupt_cli(command: list[str], at_line: str) -> str:
+    """Runs ``command``, sends Ctrl-C when its stderr prints a line starting with ``at_line``; asserts it exits 130 as
+    interrupted and returns its stderr."""
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        for line in process.stderr:  # plain log lines (not a terminal): one per finished task
+            if line.startswith(at_line):
+                process.send_signal(subprocess.signal.SIGINT)
+                break
+        _, errors = process.communicate(timeout=120)
+    finally:
+        process.kill()
+    assert process.returncode == 130, errors
+    return errors
+
+
 def run_cli(*arguments: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, "-m", "helireach_ros.cli.main", *arguments], capture_output=True, text=True, timeout=timeout
@@ -470,16 +486,7 @@ def test_ctrl_c_leaves_a_partial_file_and_resume_finishes_it(small, tmp_path):
     out = tmp_path / "interrupted.npz"
     command = [sys.executable, "-m", "helireach_ros.cli.main", "envelope", "compute", "--heights-ft", HEIGHTS_FT,
                "--speeds-kt", SPEEDS_KT, "--workers", "1", "--out", str(out)]  # fmt: skip
-    process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-    try:
-        for line in process.stderr:  # plain log lines (not a terminal): one per finished column
-            if line.startswith("sweep: 4/12"):
-                process.send_signal(subprocess.signal.SIGINT)
-                break
-        _, errors = process.communicate(timeout=120)
-    finally:
-        process.kill()
-    assert process.returncode == 130, errors
+    errors = interrupt_cli(command, "sweep: 4/12")  # one line per finished column
     assert "--resume" in errors
     with pytest.raises(EnvelopeError, match="partial"):
         load_envelope(out)
@@ -621,7 +628,7 @@ def test_sweep_warm_through_unsafe_nodes_classifies_like_the_legacy_sweep(airfra
     # also above a safe ground node (0 kt), which the legacy sweep warm-starts from
     job = EnvelopeJob(airframe, settings, 0.0, heights, speeds)
     column, legacy_column = (
-        _sweep_column(sweep_job, 0)[2] for sweep_job in (job, dataclasses.replace(job, legacy_sweep=True))
+        _sweep_column(sweep_job, 0)[-1] for sweep_job in (job, dataclasses.replace(job, legacy_sweep=True))
     )
     assert heights[0] == 0.0 and column[0].status == legacy_column[0].status == STATUS_CODES["safe"]
     assert not column[1].warm_started and legacy_column[1].warm_started and column[2].warm_started

@@ -104,6 +104,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--headwinds-kt=-15,0,15 when the list starts with a minus): an H-V diagram per wind, as the status node "
         "needs for the planner parameter headwind",
     )
+    compute.add_argument(
+        "--refine-levels", type=int, default=0, metavar="L",
+        help="boundary-following refinement over L levels (default 0: the full grid): every 2^L-th node first, "
+        "then per level only the cells whose corners disagree get the full procedure; a safe cell's inside one warm "
+        "solve per node (kept only if its plan is replay-verified), an unsafe cell's inside none (stored unsafe). "
+        "Needs 2^L k + 1 heights and speeds (e.g. --heights-ft 0:800:81 --speeds-kt 0:120:49 with L up to 4)",
+    )  # fmt: skip
     _add_executor_arguments(compute)
     compute.add_argument("--out", required=True, help="output .npz (a folder for a sweep of several combinations)")
     compute.add_argument("--resume", action="store_true", help="continue the partial file(s) at --out")
@@ -237,7 +244,15 @@ def _compute(arguments: argparse.Namespace) -> int:
             for wind in winds
         ]
         jobs = [
-            EnvelopeJob(a, settings, arguments.power_fraction, heights, speeds, climb_rates=climb_rates)
+            EnvelopeJob(
+                a,
+                settings,
+                arguments.power_fraction,
+                heights,
+                speeds,
+                climb_rates=climb_rates,
+                refine_levels=arguments.refine_levels,
+            )
             for a in airframes
         ]
         robust_job = _robust_job_factory(arguments) if arguments.robust else None

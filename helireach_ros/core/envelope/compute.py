@@ -77,6 +77,13 @@ from helireach_ros.core.envelope.data import (
 )
 from helireach_ros.core.envelope.domain import ValidityDomain
 from helireach_ros.core.envelope.progress import NullProgress, Progress
+from helireach_ros.core.envelope.refinement import (
+    REFINEMENT_ARRAY,
+    NodeOrigin,
+    check_refinable,
+    classify,
+    corners,
+)
 from helireach_ros.core.envelope.workers import SerialExecutor
 from helireach_ros.core.ocp.settings import PlannerSettings
 from helireach_ros.core.units import FT, KT
@@ -154,6 +161,11 @@ class EnvelopeJob:
     """The climb axis of a 3-D envelope, m/s (None: a 2-D envelope at ``climb_rate``)."""
     climb_rate: float = 0.0
     """m/s, positive up: the flight path every node of this (2-D or slice) job is trimmed on."""
+    refine_levels: int = 0
+    """Boundary-following refinement over this many levels (:mod:`~helireach_ros.core.envelope.refinement`; 0: the
+    full grid): the full procedure on every 2^levels-th node first, then per level only on the nodes of the cells
+    whose corners disagree; the inside of a safe cell gets one warm solve per node, of an unsafe cell none. Needs
+    2^levels k + 1 heights and speeds."""
 
     def __post_init__(self) -> None:
         axes = [("heights", self.heights, 2), ("speeds", self.speeds, 2)]
@@ -170,6 +182,8 @@ class EnvelopeJob:
             raise ValueError(f"climb rate must be finite, got {self.climb_rate!r}")
         if not 0.0 <= self.power_fraction <= 1.0:
             raise ValueError(f"power fraction must lie in [0, 1], got {self.power_fraction!r}")
+        if self.refine_levels:
+            check_refinable((len(self.heights), len(self.speeds)), self.refine_levels)
 
     def slice_jobs(self) -> tuple[EnvelopeJob, ...]:
         """One 2-D job per climb slice (a 2-D job: itself)."""
@@ -202,6 +216,7 @@ class _Solution:
     point_time_ms: float = 0.0  # solve + decode + replay in the task (phase accounting; not stored)
     point_cpu_ms: float = 0.0  # the same in CPU time of the worker (less sensitive to other load; not stored)
     discarded_solve_ms: float = 0.0  # IPOPT time of a warm guess replaced by this cold solve (not stored)
+    origin: int = NodeOrigin.GRID  # how a refined envelope's node got its answer (stored only when refined)
 
     @property
     def conservatism(self) -> tuple[int, float]:
@@ -326,17 +341,21 @@ def _stored_bound_multipliers(multipliers: np.ndarray, floor: float) -> np.ndarr
 # --- tasks (module-level functions: they run in worker processes or on Dask workers) -----------------------
 
 
-def _sweep_column(job: EnvelopeJob, column: int) -> tuple[str, int, list[_Solution]]:
+def _sweep_column(
+    job: EnvelopeJob, column: int, rows: tuple[int, ...] | None = None
+) -> tuple[str, int, tuple[int, ...], list[_Solution]]:
     """Phase 1: one speed column, heights ascending, each node warm-started from the previous node's plan.
 
     A start from a plan that is not safe is marked ``warm_from_not_safe`` (see :func:`_checked`); with
     ``job.legacy_sweep``, or after an unverified, failed or nearly safe unsafe node, or a node on the ground
-    (:data:`GROUND_HEIGHT`), the node is solved cold.
+    (:data:`GROUND_HEIGHT`), the node is solved cold. ``rows``: only these rows, ascending (default: all), each
+    warm-started from the one solved before it.
     """
     speed = job.speeds[column]
+    rows = tuple(range(len(job.heights))) if rows is None else rows
     solutions: list[_Solution] = []
     warm_start, previous_safe = None, True
-    for height in job.heights:
+    for height in (job.heights[row] for row in rows):
         solution = _solve_point(job, height, speed, warm_start)
         if warm_start is not None and not previous_safe:
             if solution.status == _UNSAFE and solution.value >= NEAR_ZERO_VALUE:
@@ -358,7 +377,28 @@ def _sweep_column(job: EnvelopeJob, column: int) -> tuple[str, int, list[_Soluti
         warm_start = _warm_start_of(solution) if previous_safe or (worth_a_guess and not job.legacy_sweep) else None
         if height <= GROUND_HEIGHT and not job.legacy_sweep:
             warm_start = None
-    return "sweep", column, solutions
+    return "sweep", column, rows, solutions
+
+
+def _interior_node(job: EnvelopeJob, row: int, column: int, warm_start) -> tuple[str, tuple[int, int], _Solution]:
+    """Refinement: a node inside cells whose corners are all safe or unverified, solved once from its corners' mean
+    solver state.
+
+    The caller keeps the answer only if it is ``safe`` (the NLP's value ≤ 0 and the stored plan replay-verified).
+    """
+    solution = _solve_point(job, job.heights[row], job.speeds[column], warm_start)
+    return "interior", (row, column), dataclasses.replace(solution, origin=NodeOrigin.INTERIOR)
+
+
+def _mean_warm_start(solutions: list[_Solution]):
+    """The mean of the solutions' stored solver states as a warm start (None if one has none)."""
+    from helireach_ros.core.planning.planner import WarmStart
+
+    starts = [_warm_start_of(solution) for solution in solutions]
+    if any(start is None for start in starts):
+        return None
+    return WarmStart(*(np.mean([getattr(start, name) for start in starts], axis=0) for name in (
+        "primal", "bound_multipliers", "constraint_multipliers")))  # fmt: skip
 
 
 def _cold_check(job: EnvelopeJob, row: int, column: int) -> tuple[str, tuple[int, int], _Solution]:
@@ -513,7 +553,8 @@ class _EnvelopeState:
         self.counters = dict.fromkeys(
             ("sweep_solves", "sweep_warm_solves", "sweep_warm_from_not_safe", "sweep_guesses_replaced_cold",
              "cold_rechecks", "cold_rechecks_of_not_safe_starts", "cold_rechecks_changed_status",
-             "rechecks_skipped_unsafe", "bisection_solves", "bisection_cold_solves", "no_trim_nodes"),
+             "rechecks_skipped_unsafe", "bisection_solves", "bisection_cold_solves", "no_trim_nodes",
+             "interior_solves", "interior_kept", "inferred_unsafe_nodes"),
             0,
         )  # fmt: skip
         # per phase: IPOPT seconds and solve + decode + replay seconds summed over tasks (worker time)
@@ -542,8 +583,8 @@ class _EnvelopeState:
         ):  # fmt: skip
             seconds[phase] = seconds.get(phase, 0.0) + spent_ms / 1e3
 
-    def set_column(self, column: int, solutions: list[_Solution]) -> None:
-        for row, solution in enumerate(solutions):
+    def set_column(self, column: int, rows: tuple[int, ...], solutions: list[_Solution]) -> None:
+        for row, solution in zip(rows, solutions, strict=True):
             self.solutions[(row, column)] = solution
             self.cold_checked[row, column] = not solution.warm_started
         no_trim = sum(solution.status == _NO_TRIM for solution in solutions)
@@ -568,6 +609,25 @@ class _EnvelopeState:
         self.counters["cold_rechecks_of_not_safe_starts"] += current.warm_from_not_safe
         self.counters["cold_rechecks_changed_status"] += self.solutions[cell].status != current.status
         self._account("cold re-check", cold.solve_time_ms, cold.point_time_ms, cold.point_cpu_ms)
+
+    def set_interior(self, cell: tuple[int, int], solution: _Solution) -> None:
+        """Keeps a refinement's interior solve if it is safe (replay-verified); otherwise the node stays pending."""
+        self.counters["interior_solves"] += 1
+        self._account("interior", solution.solve_time_ms, solution.point_time_ms, solution.point_cpu_ms)
+        if solution.status == _SAFE:
+            self.solutions[cell] = solution
+            # one warm solve whose plan lands in the replay is the node's evidence: not re-checked cold
+            self.cold_checked[cell] = True
+            self.counters["interior_kept"] += 1
+
+    def infer_unsafe(self, cell: tuple[int, int], step: int) -> None:
+        """A refinement's node inside cells whose corners are all unsafe: unsafe without a solve."""
+        value = min(self.solutions[corner].value for corner in corners(*cell, step))
+        self.solutions[cell] = _Solution(
+            _UNSAFE, value, math.nan, math.nan, False, -1, 0.0, False, origin=NodeOrigin.INFERRED_UNSAFE
+        )
+        self.cold_checked[cell] = True
+        self.counters["inferred_unsafe_nodes"] += 1
 
     def add_boundary(self, point: _BoundaryPoint) -> None:
         self.boundary[point.edge] = point
@@ -594,11 +654,12 @@ class _EnvelopeState:
             "time_to_land": (float, np.nan), "replay_value": (float, np.nan), "verified": (bool, False),
             "iterations": (np.int32, -1), "solve_time_ms": (np.float32, np.nan), "warm_started": (bool, False),
             EXTRA_NODE_ARRAY: (bool, False),
-        }  # fmt: skip
+        } | ({REFINEMENT_ARRAY: (np.int8, NodeOrigin.GRID)} if self.job.refine_levels else {})  # fmt: skip
         for name, (dtype, fill) in scalar_fields.items():
             array = np.full(shape, fill, dtype)
+            attribute = "origin" if name == REFINEMENT_ARRAY else name
             for cell, solution in self.solutions.items():
-                array[cell] = getattr(solution, name)
+                array[cell] = getattr(solution, attribute)
             arrays[name] = array
         plan_fields = {
             "plan_primal": "primal", "plan_bound_multipliers": "bound_multipliers",
@@ -653,6 +714,7 @@ class _EnvelopeState:
                 control_interpolation=interpolation if has_controls else "",
                 initial_state=arrays["plan_initial_state"][cell].copy() if has_controls else None,
                 warm_from_not_safe=bool(arrays[EXTRA_NODE_ARRAY][cell]) if EXTRA_NODE_ARRAY in arrays else False,
+                origin=int(arrays[REFINEMENT_ARRAY][cell]) if REFINEMENT_ARRAY in arrays else NodeOrigin.GRID,
             )
         state.cold_checked = arrays["cold_checked"].copy()
         state.disagree = arrays["warm_cold_disagree"].copy()
@@ -735,6 +797,7 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
             "height_tolerance_m": HEIGHT_TOLERANCE,
             "speed_tolerance_m_s": SPEED_TOLERANCE,
             "sweep": "legacy (cold after not-safe nodes)" if job.legacy_sweep else "warm through not-safe nodes",
+            "boundary_following_levels": job.refine_levels,
         },
         "software": {
             "helireach_ros": __version__,
@@ -752,6 +815,10 @@ def _base_metadata(job: EnvelopeJob, command: str | None, grid_spec: dict[str, s
 def _check_resumable(job: EnvelopeJob, envelope: Envelope, path: Path) -> None:
     where = f"partial envelope {str(path)!r}"
     envelope.check_matches(job.airframe, job.settings, job.power_fraction, where=where)
+    levels = int(envelope.metadata.get("refinement", {}).get("boundary_following_levels", 0))
+    if levels != job.refine_levels:
+        raise EnvelopeError(f"{where} was computed with {levels} refinement level(s), not {job.refine_levels}; "
+                            "resume it with the --refine-levels it was started with")  # fmt: skip
     if envelope.heights.shape != (len(job.heights),) or not np.allclose(envelope.heights, job.heights, atol=1e-9):
         raise EnvelopeError(f"{where} has another height grid than requested")
     if envelope.speeds.shape != (len(job.speeds),) or not np.allclose(envelope.speeds, job.speeds, atol=1e-9):
@@ -765,8 +832,11 @@ def _check_resumable(job: EnvelopeJob, envelope: Envelope, path: Path) -> None:
         raise EnvelopeError(f"{where} has another climb-rate axis than requested")
 
 
-def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
+def _recheck_candidates(state: _EnvelopeState, step: int = 1) -> list[tuple[int, int]]:
     """Warm-solved nodes not yet checked cold whose value is near 0 or whose status differs from a neighbour.
+
+    ``step``: only the nodes of every ``step``-th row and column (a refinement's coarser lattice, whose neighbours
+    are ``step`` nodes apart).
 
     Nodes whose own warm answer is not ``safe`` go first: when the cold solve turns such a lone
     unverified node safe, its safe neighbours no longer differ from it and need no re-check. The
@@ -774,8 +844,9 @@ def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
     Unsafe answers warm-started from a safe plan are left out (their verdict cannot change, see
     :func:`_checked`), except with ``legacy_sweep``.
     """
-    codes, values = state.codes(), state.values()
-    differs = np.zeros(state.shape, bool)
+    grid = (slice(None, None, step), slice(None, None, step))
+    codes, values = state.codes()[grid], state.values()[grid]
+    differs = np.zeros(codes.shape, bool)
     vertical, horizontal = codes[:-1, :] != codes[1:, :], codes[:, :-1] != codes[:, 1:]
     differs[:-1, :] |= vertical
     differs[1:, :] |= vertical
@@ -783,20 +854,21 @@ def _recheck_candidates(state: _EnvelopeState) -> list[tuple[int, int]]:
     differs[:, 1:] |= horizontal
     with np.errstate(invalid="ignore"):
         near_zero = np.abs(values) < NEAR_ZERO_VALUE
-    candidates = (codes != PENDING) & ~state.cold_checked & (near_zero | differs)
+    candidates = (codes != PENDING) & ~state.cold_checked[grid] & (near_zero | differs)
     if not state.job.legacy_sweep:
         # unsafe from a warm start out of a safe plan wins over any cold answer (_checked): nothing to learn
         verdict_fixed = np.zeros(state.shape, bool)
         for cell, solution in state.solutions.items():
             verdict_fixed[cell] = solution.status == _UNSAFE and not solution.warm_from_not_safe
-        skipped = candidates & verdict_fixed
-        state.skipped_rechecks.update((int(r), int(c)) for r, c in zip(*np.nonzero(skipped), strict=True))
+        skipped = candidates & verdict_fixed[grid]
+        state.skipped_rechecks.update((step * int(r), step * int(c)) for r, c in zip(*np.nonzero(skipped),
+                                                                                     strict=True))  # fmt: skip
         state.counters["rechecks_skipped_unsafe"] = len(state.skipped_rechecks)
-        candidates &= ~verdict_fixed
+        candidates &= ~verdict_fixed[grid]
     not_safe_first = candidates & (codes != _SAFE)
     if np.any(not_safe_first):
         candidates = not_safe_first
-    return [(int(r), int(c)) for r, c in zip(*np.nonzero(candidates), strict=True)]
+    return [(step * int(r), step * int(c)) for r, c in zip(*np.nonzero(candidates), strict=True)]
 
 
 def _boundary_edges(state: _EnvelopeState) -> list[tuple[int, int, int, int]]:
@@ -935,26 +1007,54 @@ def compute_envelope(
     try:
         guard.__enter__()
         guard.check()
-        rows = len(job.heights)
-        sweeps = [
-            (index, state.job, column)
-            for index, state in enumerate(states)
-            for column in range(len(job.speeds))
-            if any((row, column) not in state.solutions for row in range(rows))
-        ]
-        run_phase(
-            "sweep", _sweep_column, sweeps,
-            lambda item: rows, lambda state, result: state.set_column(result[1], result[2]),
-        )  # fmt: skip
-        while candidates := [
-            (index, state.job, row, column)
-            for index, state in enumerate(states)
-            for row, column in _recheck_candidates(state)
-        ]:
+
+        def sweep(name: str, step: int) -> None:
+            """The sweep over the pending nodes of every ``step``-th column and row, then their cold re-checks."""
+            sweeps = [
+                (index, state.job, column, pending)
+                for index, state in enumerate(states)
+                for column in range(0, len(job.speeds), step)
+                if (pending := tuple(row for row in range(0, len(job.heights), step)
+                                     if (row, column) not in state.solutions))
+            ]  # fmt: skip
             run_phase(
-                "cold re-check", _cold_check, candidates,
-                lambda item: 1, lambda state, result: state.merge_cold(result[1], result[2]),
+                name, _sweep_column, sweeps,
+                lambda item: len(item[-1]),  # a task's pending rows, a result's solutions
+                lambda state, result: state.set_column(result[1], result[2], result[3]),
             )  # fmt: skip
+            while candidates := [
+                (index, state.job, row, column)
+                for index, state in enumerate(states)
+                for row, column in _recheck_candidates(state, step)
+            ]:
+                run_phase(
+                    "cold re-check", _cold_check, candidates,
+                    lambda item: 1, lambda state, result: state.merge_cold(result[1], result[2]),
+                )  # fmt: skip
+
+        if job.refine_levels:
+            step = 2**job.refine_levels
+            sweep("coarse sweep", step)
+            while step > 1:
+                step //= 2
+                interior = []
+                for index, state in enumerate(states):
+                    inside_safe, inside_unsafe = classify(state.codes(), step, (_SAFE, _UNVERIFIED), _UNSAFE)
+                    for row, column in zip(*np.nonzero(inside_unsafe), strict=True):
+                        if (row, column) not in state.solutions:
+                            state.infer_unsafe((int(row), int(column)), step)
+                    for row, column in zip(*np.nonzero(inside_safe), strict=True):
+                        cell = (int(row), int(column))
+                        start = _mean_warm_start([state.solutions[corner] for corner in corners(*cell, step)])
+                        if cell not in state.solutions and start is not None:
+                            interior.append((index, state.job, *cell, start))
+                run_phase(
+                    "interior", _interior_node, interior,
+                    lambda item: 1, lambda state, result: state.set_interior(result[1], result[2]),
+                )  # fmt: skip
+                if step > 1:
+                    sweep("refinement sweep", step)
+        sweep("sweep", 1)
         edges = [
             (index, state.job, edge, state.solutions[edge[:2]], state.solutions[edge[2:]].value)
             for index, state in enumerate(states)
