@@ -106,6 +106,15 @@ def test_the_cli_queries_a_family_at_its_conditions_and_refuses_conditions_outsi
     document = json.loads(summary.stdout)
     assert document["range"] == "15000-16000 lbf, DA 0-3000 ft" and len(document["members"]) == 4
     assert isinstance(document["monotonicity_exceptions"], list)
+    # the lightest, lowest member always bounds itself; a line claims a member bounds every member below it
+    family = EnvelopeFamily.load(family_folder)
+    assert document["valid_up_to"] == family.valid_up_to() and document["valid_up_to"]
+    for line in document["valid_up_to"]:
+        weight, altitude = (float(word) for word in line.split() if word.replace(".", "").isdigit())
+        top = family.at(weight * LBF, altitude * FT).members[0][1]
+        for member, envelope in family.members:
+            if member.gross_weight <= weight * LBF and member.density_altitude <= altitude * FT:
+                assert not np.any((top.status == "safe") & (envelope.status != "safe")), (line, member.conditions)
     figure = family_folder.parent / "family.png"
     assert run_cli("envelope", "plot", str(family_folder), "--out", str(figure)).returncode == 0
     assert figure.stat().st_size > 10_000

@@ -490,12 +490,14 @@ def _family(arguments: argparse.Namespace) -> int:
     if arguments.json:
         print(json.dumps({
             "airframe": family.airframe_name, "range": family.range_text(), "members": members,
-            "monotonicity_exceptions": exceptions,
+            "monotonicity_exceptions": exceptions, "valid_up_to": family.valid_up_to(),
         }))  # fmt: skip
         return 0
     print(f"{family.airframe_name} envelope family: answers for {family.range_text()} ({len(members)} members)")
     for member in members:
         print(f"  {member['conditions']:32} {member['file']}: {member['statuses']}")
+    for line in family.valid_up_to():
+        print(f"  {line}")
     print(f"  not monotone in weight or density altitude at {len(exceptions)} grid nodes")
     for line in exceptions:
         print(f"    {line}")

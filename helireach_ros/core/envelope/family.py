@@ -32,6 +32,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from helireach_ros.core.aircraft.airframe import Airframe
 from helireach_ros.core.envelope.data import Envelope, EnvelopeError, EnvelopeQuery, load_envelope
 from helireach_ros.core.units import FT, KT, LBF
@@ -422,6 +424,40 @@ class EnvelopeFamily:
                         f"(node {tuple(int(i) for i in index)})"
                     )
         return exceptions
+
+    def valid_up_to(self) -> list[str]:
+        """The flight manual's "H-V diagram valid up to weight W at density altitude D", per wind.
+
+        A member's diagram is valid up to its conditions when it is safe nowhere that a member at or below its weight
+        and density altitude (same wind, same grid) is not: it then bounds every lighter, lower condition of the
+        family conservatively. Returned: one line per member with that property that no heavier or higher such
+        member dominates, e.g. ``H-V valid up to 17000 lbf at DA 4000 ft``.
+        """
+        lines = []
+        for wind in self.headwinds:
+            members = [(member, envelope) for member, envelope in self.members if member.headwind == wind]
+
+            def bounds(top: FamilyMember, diagram: Envelope, members: list = members) -> bool:
+                return all(
+                    envelope.status.shape == diagram.status.shape
+                    and not np.any((diagram.status == "safe") & (envelope.status != "safe"))
+                    for member, envelope in members
+                    if member.gross_weight <= top.gross_weight and member.density_altitude <= top.density_altitude
+                )
+
+            valid = [member for member, envelope in members if bounds(member, envelope)]
+            for member in valid:
+                dominated = any(
+                    other is not member
+                    and other.gross_weight >= member.gross_weight
+                    and other.density_altitude >= member.density_altitude
+                    for other in valid
+                )
+                if not dominated:
+                    weight, altitude = member.gross_weight / LBF, member.density_altitude / FT
+                    wind_text = f", headwind {wind / KT:+.0f} kt" if wind else ""
+                    lines.append(f"H-V valid up to {weight:.0f} lbf at DA {altitude:.0f} ft{wind_text}")
+        return lines
 
     def __repr__(self) -> str:
         return f"EnvelopeFamily({self.airframe_name}, {len(self.members)} members, {self.range_text()})"
