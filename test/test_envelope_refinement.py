@@ -1,5 +1,5 @@
 """Boundary-following refinement: the full grid's answers for fewer solves, every safe node on its own
-replay-verified plan, resumable after Ctrl-C, refused on grids it cannot refine.
+replay-verified plan, slice by slice in 3-D, resumable after Ctrl-C, refused on grids it cannot refine.
 
 The grid (100-500 ft x 0-90 kt, 5 x 7 nodes) is chosen so that one refinement level meets every kind of coarse
 cell: corners all safe, all unsafe, and disagreeing.
@@ -19,6 +19,7 @@ from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
 from helireach_ros.core.envelope.data import load_envelope
 from helireach_ros.core.envelope.grid import parse_range
 from helireach_ros.core.envelope.refinement import REFINEMENT_ARRAY, NodeOrigin, classify, corners
+from helireach_ros.core.envelope.workers import make_executor
 from helireach_ros.core.evidence.replay import replay_controls
 from helireach_ros.core.planning.planner import get_planner
 from helireach_ros.core.units import FT, KT
@@ -122,3 +123,25 @@ def test_a_grid_the_levels_cannot_halve_is_refused(airframe, settings, tmp_path)
         _cli("--refine-levels", "2", "--out", str(tmp_path / "x.npz")), capture_output=True, text=True, timeout=120
     )
     assert refused.returncode == 2 and "2^2 k + 1" in refused.stderr
+
+
+def test_a_3d_envelope_is_refined_slice_by_slice_on_worker_processes(full_and_refined, airframe, settings):
+    """Each climb slice of a refined 3-D envelope is the refined 2-D envelope of its climb rate (here on two local
+    worker processes against the serial 2-D run: the answer does not depend on where a task ran)."""
+    _, level = full_and_refined
+    job = EnvelopeJob(airframe, settings, 0.0, parse_range(HEIGHTS_FT, FT), parse_range(SPEEDS_KT, KT),
+                      climb_rates=(-1000 * FT / 60.0, 0.0), refine_levels=1)  # fmt: skip
+    executor = make_executor(2)
+    try:
+        stacked = compute_envelope(job, executor)
+    finally:
+        executor.close()
+    origin = stacked.arrays[REFINEMENT_ARRAY]
+    assert stacked.is_3d and origin.shape == stacked.status.shape
+    level_slice, level_2d = stacked.slice(1).arrays, level.arrays
+    different = [
+        name for name in level_2d
+        if name != "solve_time_ms" and not np.array_equal(level_slice[name], level_2d[name], equal_nan=True)
+    ]  # fmt: skip
+    assert different == []
+    assert np.any(origin[0] != NodeOrigin.GRID) and np.all(stacked.arrays["verified"][stacked.status == "safe"])
