@@ -1048,8 +1048,10 @@ def compute_envelope(
                             state.infer_unsafe((int(row), int(column)), step)
                     for row, column in zip(*np.nonzero(inside_safe), strict=True):
                         cell = (int(row), int(column))
+                        if cell in state.solutions:  # a resumed run's
+                            continue
                         start = _mean_warm_start([state.solutions[corner] for corner in corners(*cell, step)])
-                        if cell not in state.solutions and start is not None:
+                        if start is not None:  # a corner decided without the NLP: the full procedure
                             interior.append((index, state.job, *cell, start))
                 run_phase(
                     "interior", _interior_node, interior,

@@ -13,7 +13,7 @@ edge midpoint), and gets what its enclosing cells' corners say (:func:`classify`
   Otherwise it is solved by the full grid procedure;
 - **every corner unsafe** — ``inferred unsafe``: no solve; the node is stored ``unsafe`` with the smallest of its
   corners' values (the conservative direction: it may only hide a safe pocket, never claim one);
-- **anything else** (corners that disagree, or unverified, failed, no-trim corners) — solved by the full grid
+- **anything else** (corners that disagree, or failed or no-trim corners) — solved by the full grid
   procedure on that level's lattice (sweep and cold re-checks), as if no coarser pass had run.
 
 The boundary refinement along grid lines then runs once, on the finest grid.
@@ -42,7 +42,8 @@ class NodeOrigin(enum.IntEnum):
     GRID = 0
     """The full grid procedure (sweep, cold re-check, boundary), as in an unrefined envelope."""
     INTERIOR = 1
-    """One warm solve inside a cell whose corners are all safe, kept because its plan is safe and replay-verified."""
+    """One warm solve inside cells whose corners are all safe or unverified, kept because its plan is safe and
+    replay-verified."""
     INFERRED_UNSAFE = 2
     """No solve: inside cells whose corners are all unsafe, stored unsafe with the smallest corner value."""
 
@@ -77,18 +78,15 @@ def corners(row: int, column: int, step: int = 1) -> list[tuple[int, int]]:
 
 
 def _enclosing_cells_agree(codes: np.ndarray, accepted: tuple[int, ...]) -> np.ndarray:
-    """Per node of ``codes`` (a lattice of step 1 here): every cell of the every-other-node lattice containing it
-    (1, 2 or 4 of them) has all four corners' codes in ``accepted``."""
-    rows, columns = codes.shape
+    """Per node of ``codes`` (a lattice of step 1 here, odd counts: every node lies in a cell): every cell of the
+    every-other-node lattice containing it (1, 2 or 4 of them) has all four corners' codes in ``accepted``."""
     coarse = np.isin(codes[::2, ::2], accepted)
     cell_uniform = coarse[:-1, :-1] & coarse[1:, :-1] & coarse[:-1, 1:] & coarse[1:, 1:]
-    agree = np.ones((rows, columns), bool)
-    touched = np.zeros((rows, columns), bool)
+    agree = np.ones(codes.shape, bool)
     for cell_row, cell_column in np.ndindex(cell_uniform.shape):
         block = (slice(2 * cell_row, 2 * cell_row + 3), slice(2 * cell_column, 2 * cell_column + 3))
         agree[block] &= cell_uniform[cell_row, cell_column]
-        touched[block] = True
-    return agree & touched
+    return agree
 
 
 def classify(
