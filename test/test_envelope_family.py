@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from functools import partial
 from pathlib import Path
 
@@ -20,7 +19,7 @@ from rclpy.parameter import Parameter
 from test_envelope import run_cli
 from test_ros_nodes import Harness
 
-from helireach_ros.core.envelope.data import EnvelopeError, EnvelopeQuery
+from helireach_ros.core.envelope.data import EnvelopeError, EnvelopeQuery, read_envelope_file
 from helireach_ros.core.envelope.family import FAMILY_INDEX, EnvelopeFamily, read_family_index
 from helireach_ros.core.units import FT, KT, LBF
 from helireach_ros.ros import messages as rm
@@ -120,30 +119,66 @@ def test_the_cli_queries_a_family_at_its_conditions_and_refuses_conditions_outsi
     assert figure.stat().st_size > 10_000
 
 
-def test_a_killed_family_sweep_resumes_and_keeps_the_members_it_finished(tmp_path: Path, airframe) -> None:
-    folder = tmp_path / "killed"
+def _same_arrays(first: Path, second: Path) -> bool:
+    """The two envelope files hold the same statuses, values and boundary (NaN where the other has NaN)."""
+    a, b = read_envelope_file(first), read_envelope_file(second)
+    return (
+        np.array_equal(a.status, b.status)
+        and np.array_equal(a.value, b.value, equal_nan=True)
+        and np.array_equal(np.asarray(a.boundary), np.asarray(b.boundary), equal_nan=True)
+    )
+
+
+def test_a_family_is_computed_together_and_each_member_equals_its_envelope_alone(
+    family_folder: Path, tmp_path: Path
+) -> None:
+    """The members' tasks run together in every phase (one progress display), and what a member gets is what its
+    conditions give when computed alone."""
+    _, members, _ = read_family_index(family_folder)
+    compute = read_envelope_file(family_folder / members[0].file).metadata["compute"]
+    assert compute["members_computed_together"] == 4
+    assert compute["tasks"]["sweep"] == 4 * 3  # every member's 3 speed columns in one phase
+    alone = tmp_path / "alone.npz"
+    result = run_cli("envelope", "compute", *GRID, "--weights-lb", "16000", "--density-altitude-ft", "3000",
+                     "--workers", "2", "--out", str(alone), "--quiet")  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert _same_arrays(alone, family_folder / "uh60a_class_16000lb_da3000ft_pf0.npz")
+
+
+def test_a_family_sweep_stopped_midway_saves_every_member_and_resumes_to_the_same_family(
+    family_folder: Path, tmp_path: Path, airframe
+) -> None:
+    """SIGTERM (a cluster job pre-empted, or Ctrl-C) in the middle of the sweep: every member's partial file is
+    saved, the family does not load, and ``--resume`` completes it to exactly the uninterrupted family."""
+    folder = tmp_path / "stopped"
     command = [sys.executable, "-m", "helireach_ros.cli.main", "envelope", "compute", *GRID, *CONDITIONS,
-               "--workers", "1", "--out", str(folder), "--quiet"]  # fmt: skip
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
-    finished = []
-    deadline = time.monotonic() + 240.0
-    while not finished and time.monotonic() < deadline and process.poll() is None:
-        time.sleep(0.2)
-        if (folder / FAMILY_INDEX).is_file():
-            finished = [member for member in read_family_index(folder)[1] if member.complete]
-    os.killpg(process.pid, signal.SIGKILL)
-    process.wait(timeout=30)
-    assert finished and len(finished) < 4, "the sweep was not caught between its members"
+               "--workers", "1", "--out", str(folder)]  # fmt: skip
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)  # fmt: skip
+    assert process.stderr is not None
+    seen = []
+    for line in process.stderr:  # the progress display's lines: stop once the sweep has solved a node
+        seen.append(line)
+        if line.startswith("sweep: ") and not line.startswith("sweep: 0/"):
+            os.killpg(process.pid, signal.SIGTERM)
+            break
+    rest = process.communicate(timeout=120)[1]
+    assert process.returncode == 130, "".join(seen) + rest
+    assert "continue with --resume" in rest
+    files = [folder / member.file for member in read_family_index(folder)[1]]
+    assert len(files) == 4 and all(read_envelope_file(f, allow_partial=True).complete is False for f in files)
     with pytest.raises(EnvelopeError, match="not complete"):
         EnvelopeFamily.load(folder, airframe)
 
     resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True, timeout=300)
     assert resumed.returncode == 0, resumed.stderr
+    assert resumed.stderr.count("resuming (") == 4
+    done = [int(line.split("resuming (")[1].split()[0]) for line in resumed.stderr.splitlines() if "resuming (" in line]
+    assert sum(done) > 0
     family = EnvelopeFamily.load(folder, airframe)
-    kept = {member.file: member for member, _ in family.members}
-    assert len(kept) == 4
-    for member in finished:
-        assert kept[member.file].sha256 == member.sha256  # finished before the kill: not computed again
+    assert len(family.members) == 4
+    for member, _ in family.members:
+        assert _same_arrays(folder / member.file, family_folder / member.file), member.conditions
 
 
 def _judged_a_state(statuses: list) -> bool:

@@ -205,7 +205,7 @@ def _error(message: str) -> int:
 
 def _compute(arguments: argparse.Namespace) -> int:
     from helireach_ros.core.aircraft.airframe import ConfigError, load_airframe
-    from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelope
+    from helireach_ros.core.envelope.compute import ComputeInterrupted, EnvelopeJob, compute_envelopes
     from helireach_ros.core.envelope.data import STATUS_CODES, EnvelopeError, save_envelope
     from helireach_ros.core.envelope.grid import condition_file_name, parse_list, parse_range
     from helireach_ros.core.envelope.progress import Progress
@@ -263,6 +263,9 @@ def _compute(arguments: argparse.Namespace) -> int:
         paths = [out]
     else:
         paths = [out / condition_file_name(job.airframe, job.power_fraction) for job in jobs]
+    for path in paths:
+        if path.exists() and not arguments.resume and _is_partial(path):
+            return _error(f"{path} is a partial envelope; continue it with --resume, or delete it to start over")
     command = "helireach " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["envelope"] else None
     grid_spec = {"heights_ft": arguments.heights_ft, "speeds_kt": arguments.speeds_kt}
     if climb_rates is not None:
@@ -284,24 +287,25 @@ def _compute(arguments: argparse.Namespace) -> int:
             for job, path in zip(jobs, paths, strict=True)
         ]  # fmt: skip
         family = FamilyIndexWriter(out, jobs[0].airframe.name, members, command)
-    try:
-        for index, (job, path) in enumerate(zip(jobs, paths, strict=True)):
+    progress = None if arguments.quiet else Progress(sys.stderr)
+    for index, (job, path) in enumerate(zip(jobs, paths, strict=True)):
+        if progress:
             label = f"[{index + 1}/{len(jobs)}] " if len(jobs) > 1 else ""
-            progress = None if arguments.quiet else Progress(sys.stderr, label=label)
-            if progress:
-                progress.message(
-                    f"{label}{job.airframe.name}, W = {job.airframe.gross_weight / LBF:.0f} lbf, density altitude "
-                    f"{job.airframe.density_altitude / FT:.0f} ft, headwind {job.airframe.headwind / KT:+.0f} kt, "
-                    f"power fraction {job.power_fraction:g}: "
-                    f"{slices}{len(heights)} x {len(speeds)} nodes, method {job.settings.method}, reaction delay "
-                    f"{job.settings.reaction_delay_s:g} s, on {executor.description} -> {path}"
-                )
-            if path.exists() and not arguments.resume and _is_partial(path):
-                return _error(f"{path} is a partial envelope; continue it with --resume, or delete it to start over")
-            envelope = compute_envelope(
-                job, executor, path, resume=arguments.resume and path.exists(), progress=progress,
-                command=command, grid_spec=grid_spec,
-            )  # fmt: skip
+            progress.message(
+                f"{label}{job.airframe.name}, W = {job.airframe.gross_weight / LBF:.0f} lbf, density altitude "
+                f"{job.airframe.density_altitude / FT:.0f} ft, headwind {job.airframe.headwind / KT:+.0f} kt, "
+                f"power fraction {job.power_fraction:g}: "
+                f"{slices}{len(heights)} x {len(speeds)} nodes, method {job.settings.method}, reaction delay "
+                f"{job.settings.reaction_delay_s:g} s, on {executor.description} -> {path}"
+            )
+    if progress and len(jobs) > 1:
+        progress.message(f"{len(jobs)} envelopes computed together: every phase runs all of their tasks")
+    try:
+        envelopes = compute_envelopes(
+            jobs, executor, paths, resume=[arguments.resume and path.exists() for path in paths], progress=progress,
+            command=command, grid_spec=grid_spec,
+        )  # fmt: skip
+        for index, (job, path, envelope) in enumerate(zip(jobs, paths, envelopes, strict=True)):
             if robust_job is not None:
                 envelope = add_robust_verdicts(
                     envelope, robust_job(job.airframe, job.settings), executor, progress, command

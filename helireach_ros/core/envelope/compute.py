@@ -40,6 +40,9 @@ path, computed by exactly these phases; the slices' tasks run together in each p
 for all), and the result is their stack (:func:`~helireach_ros.core.envelope.data.stack_slices`). A node
 whose (speed, climb rate) has no steady powered flight is stored as ``no_trim`` without a solve.
 
+**Families** (one envelope per gross weight and density altitude): :func:`compute_envelopes` runs every
+member's tasks together in each phase, as a 3-D envelope's slices, so a cluster gets the whole family's tasks.
+
 Ctrl-C (or SIGTERM) saves a partial envelope file; ``resume=True`` continues it. Tasks that were
 running are redone (a sweep task is one column, a few seconds of work).
 """
@@ -54,7 +57,7 @@ import os
 import platform
 import signal
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -96,6 +99,7 @@ __all__ = [
     "ComputeInterrupted",
     "EnvelopeJob",
     "compute_envelope",
+    "compute_envelopes",
 ]
 
 if TYPE_CHECKING:
@@ -924,69 +928,156 @@ def compute_envelope(
         ComputeInterrupted: on Ctrl-C/SIGTERM, after saving a partial file to ``out_path``.
         EnvelopeError: ``resume`` with a missing or incompatible partial file.
     """
+    (envelope,) = compute_envelopes([job], executor, [out_path], resume, progress, command, grid_spec)
+    return envelope
+
+
+@dataclass
+class _Member:
+    """One envelope of a :func:`compute_envelopes` run: its slices' states, or the finished file it resumed."""
+
+    job: EnvelopeJob
+    path: Path | None
+    metadata: dict[str, Any]
+    states: list[_EnvelopeState]
+    previous_wall_time_s: float = 0.0
+    finished: Envelope | None = None  # complete before this run: nothing to compute
+
+
+def _start_member(
+    job: EnvelopeJob, path: Path | None, resume: bool, progress: Progress, command: str | None,
+    grid_spec: dict[str, str] | None,
+) -> _Member:  # fmt: skip
+    """A member's states: fresh, or read back from its partial file."""
+    member = _Member(job, path, _base_metadata(job, command, grid_spec), [])
+    slice_jobs = job.slice_jobs()
+    if not resume:
+        member.states = [_EnvelopeState(slice_job) for slice_job in slice_jobs]
+        return member
+    if path is None:
+        raise EnvelopeError("resume needs the output file of the interrupted computation")
+    previous = read_envelope_file(path, allow_partial=True)
+    _check_resumable(job, previous, path)
+    if previous.complete:
+        progress.message(f"{path}: already complete (envelope {previous.envelope_id}); nothing to do")
+        member.finished = previous
+        return member
+    # the file's counters are totals over the slices: restored once, into the first slice
+    member.states = [
+        _EnvelopeState.from_envelope(slice_job, previous.slice(index), restore_counters=index == 0)
+        for index, slice_job in enumerate(slice_jobs)
+    ]
+    member.previous_wall_time_s = float(previous.metadata.get("compute", {}).get("wall_time_s", 0.0))
+    done = sum(len(state.solutions) for state in member.states)
+    total = sum(math.prod(state.shape) for state in member.states)
+    progress.message(f"{path}: resuming ({done} of {total} nodes done)")
+    return member
+
+
+def compute_envelopes(
+    jobs: Sequence[EnvelopeJob],
+    executor=None,
+    out_paths: Sequence[str | os.PathLike[str] | None] | None = None,
+    resume: bool | Sequence[bool] = False,
+    progress: Progress | None = None,
+    command: str | None = None,
+    grid_spec: dict[str, str] | None = None,
+) -> list[Envelope]:
+    """Computes (or resumes) several envelopes together, e.g. a family's members over weight and density altitude.
+
+    Every phase runs the tasks of every member at once, as a 3-D envelope's slices do, so a pool or cluster has a
+    family's worth of tasks per phase (a 2-D member alone has one sweep task per speed column) and one progress
+    display covers the family. Each member's result is what :func:`compute_envelope` computes for its job alone
+    (a task's result does not depend on which others run beside it); all members complete at the end of the run.
+
+    Args:
+        jobs: one per member; all with the same ``refine_levels``.
+        out_paths: one per member (None: not saved), where each member's partial file goes on Ctrl-C/SIGTERM and
+            every ``CHECKPOINT_INTERVAL_S``.
+        resume: continue the partial files (one flag for all, or one per member); a member whose file is
+            complete is returned as it is.
+        executor, progress, command, grid_spec: as for :func:`compute_envelope`.
+
+    Returns:
+        The complete envelopes, in the order of ``jobs``.
+
+    Raises:
+        ComputeInterrupted: on Ctrl-C/SIGTERM, after saving every member's partial file (``path``: the first
+            member's file, or their common folder).
+        EnvelopeError: resuming a missing or incompatible partial file.
+        ValueError: no jobs, lengths that do not match, or different refinement levels.
+    """
     executor = executor or SerialExecutor()
     progress = progress or NullProgress()
-    path = Path(out_path) if out_path is not None else None
-    metadata = _base_metadata(job, command, grid_spec)
-    slice_jobs = job.slice_jobs()
-    states = [_EnvelopeState(slice_job) for slice_job in slice_jobs]
-    previous_wall_time_s = 0.0
-    if resume:
-        if path is None:
-            raise EnvelopeError("resume needs the output file of the interrupted computation")
-        previous = read_envelope_file(path, allow_partial=True)
-        _check_resumable(job, previous, path)
-        if previous.complete:
-            progress.message(f"{path}: already complete (envelope {previous.envelope_id}); nothing to do")
-            return previous
-        # the file's counters are totals over the slices: restored once, into the first slice
-        states = [
-            _EnvelopeState.from_envelope(slice_job, previous.slice(index), restore_counters=index == 0)
-            for index, slice_job in enumerate(slice_jobs)
-        ]
-        previous_wall_time_s = float(previous.metadata.get("compute", {}).get("wall_time_s", 0.0))
-        done = sum(len(state.solutions) for state in states)
-        total = sum(math.prod(state.shape) for state in states)
-        progress.message(f"{path}: resuming ({done} of {total} nodes done)")
+    paths = [None if path is None else Path(path) for path in (out_paths or [None] * len(jobs))]
+    resumes = [bool(resume)] * len(jobs) if isinstance(resume, bool) else [bool(flag) for flag in resume]
+    if not jobs or len(paths) != len(jobs) or len(resumes) != len(jobs):
+        raise ValueError(f"{len(jobs)} jobs need as many output paths and resume flags")
+    refine_levels = {job.refine_levels for job in jobs}
+    if len(refine_levels) != 1:
+        raise ValueError(f"envelopes computed together need one number of refinement levels, got {refine_levels}")
+    (levels,) = refine_levels
+    members = [
+        _start_member(job, path, flag, progress, command, grid_spec)
+        for job, path, flag in zip(jobs, paths, resumes, strict=True)
+    ]
+    running = [member for member in members if member.finished is None]
+    if not running:
+        return [member.finished for member in members if member.finished is not None]
+    states = [state for member in running for state in member.states]
+    together = {"members_computed_together": len(running)} if len(running) > 1 else {}
+    saved_paths = [member.path for member in running if member.path is not None]
+    if len(saved_paths) > 1 and len({path.parent for path in saved_paths}) == 1:
+        interrupted_path: Path | None = saved_paths[0].parent
+    else:
+        interrupted_path = saved_paths[0] if saved_paths else None
 
     started = time.perf_counter()
     last_checkpoint = [time.monotonic()]
     phase_seconds: dict[str, float] = {}
     phase_tasks: dict[str, int] = {}  # tasks submitted per phase, this run
 
-    def summed(name: str) -> dict[str, float]:
+    def summed(member: _Member, name: str) -> dict[str, float]:
         total: dict[str, float] = {}
-        for state in states:
+        for state in member.states:
             for phase, seconds in getattr(state, name).items():
                 total[phase] = total.get(phase, 0.0) + seconds
         return {phase: round(seconds, 3) for phase, seconds in total.items()}
 
-    def snapshot(complete: bool) -> Envelope:
-        counters = {name: sum(state.counters[name] for state in states) for name in states[0].counters}
+    def snapshot(member: _Member, complete: bool) -> Envelope:
+        member_states = member.states
+        counters = {name: sum(state.counters[name] for state in member_states) for name in member_states[0].counters}
         compute = {
-            "wall_time_s": round(previous_wall_time_s + time.perf_counter() - started, 3),
+            "wall_time_s": round(member.previous_wall_time_s + time.perf_counter() - started, 3),
+            # the run's phases and tasks: every member's together when several were computed at once
             "phases_s": {k: round(v, 3) for k, v in phase_seconds.items()},
             "tasks": dict(phase_tasks),
-            # summed over workers, this run only (a resumed run counts what it computed itself)
-            "phase_ipopt_s": summed("phase_solver_seconds"),
-            "phase_solve_and_replay_s": summed("phase_point_seconds"),
-            "phase_solve_and_replay_cpu_s": summed("phase_cpu_seconds"),
+            **together,
+            # summed over workers, this member and this run only (a resumed run counts what it computed itself)
+            "phase_ipopt_s": summed(member, "phase_solver_seconds"),
+            "phase_solve_and_replay_s": summed(member, "phase_point_seconds"),
+            "phase_solve_and_replay_cpu_s": summed(member, "phase_cpu_seconds"),
             "executor": executor.description,
             "counters": counters,
-            "nodes": sum(math.prod(state.shape) for state in states),
-            "boundary_points": sum(len(state.boundary) for state in states),
+            "nodes": sum(math.prod(state.shape) for state in member_states),
+            "boundary_points": sum(len(state.boundary) for state in member_states),
             "finished_utc": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds") if complete else None,
         }
-        metadata_now = dict(metadata, compute=compute)
-        if job.climb_rates is None:
-            return states[0].to_envelope(metadata_now, complete)
-        sizes = _plan_sizes(solution for state in states for solution in state.solutions.values())
-        slices = [state.to_envelope(metadata_now, complete, sizes) for state in states]
-        return stack_slices(slices, job.climb_rates, dict(metadata_now, complete=complete))
+        metadata_now = dict(member.metadata, compute=compute)
+        if member.job.climb_rates is None:
+            return member_states[0].to_envelope(metadata_now, complete)
+        sizes = _plan_sizes(solution for state in member_states for solution in state.solutions.values())
+        slices = [state.to_envelope(metadata_now, complete, sizes) for state in member_states]
+        return stack_slices(slices, member.job.climb_rates, dict(metadata_now, complete=complete))
+
+    def save_partial(*, only_started: bool = False) -> None:
+        for member in running:
+            if member.path is not None and not (only_started and not any(s.solutions for s in member.states)):
+                save_envelope(snapshot(member, complete=False), member.path)
 
     def checkpoint(force: bool = False) -> None:
-        if path is not None and (force or time.monotonic() - last_checkpoint[0] > CHECKPOINT_INTERVAL_S):
-            save_envelope(snapshot(complete=False), path)
+        if force or time.monotonic() - last_checkpoint[0] > CHECKPOINT_INTERVAL_S:
+            save_partial()
             last_checkpoint[0] = time.monotonic()
 
     def run_phase(name: str, function, tasks: list[tuple], units: Callable[[Any], int], handle) -> None:
@@ -1016,8 +1107,8 @@ def compute_envelope(
             sweeps = [
                 (index, state.job, column, pending)
                 for index, state in enumerate(states)
-                for column in range(0, len(job.speeds), step)
-                if (pending := tuple(row for row in range(0, len(job.heights), step)
+                for column in range(0, len(state.job.speeds), step)
+                if (pending := tuple(row for row in range(0, len(state.job.heights), step)
                                      if (row, column) not in state.solutions))
             ]  # fmt: skip
             run_phase(
@@ -1035,8 +1126,8 @@ def compute_envelope(
                     lambda item: 1, lambda state, result: state.merge_cold(result[1], result[2]),
                 )  # fmt: skip
 
-        if job.refine_levels:
-            step = 2**job.refine_levels
+        if levels:
+            step = 2**levels
             sweep("coarse sweep", step)
             while step > 1:
                 step //= 2
@@ -1072,14 +1163,12 @@ def compute_envelope(
         )  # fmt: skip
     except KeyboardInterrupt:
         executor.abort()
-        if path is not None:
-            save_envelope(snapshot(complete=False), path)
-        raise ComputeInterrupted(path) from None
+        save_partial()
+        raise ComputeInterrupted(interrupted_path) from None
     except Exception:
         # e.g. a Dask worker without helireach_ros: keep what was computed, then report the error
         executor.abort()
-        if path is not None and any(state.solutions for state in states):
-            save_envelope(snapshot(complete=False), path)
+        save_partial(only_started=True)
         raise
     finally:
         guard.__exit__()
@@ -1087,7 +1176,8 @@ def compute_envelope(
     for state in states:
         current_edges = set(_boundary_edges(state))
         state.boundary = {edge: point for edge, point in state.boundary.items() if edge in current_edges}
-    envelope = snapshot(complete=True).answers()  # as the file holds it; the solver state rides along
-    if path is not None:
-        save_envelope(envelope, path)
-    return envelope
+    for member in running:
+        member.finished = snapshot(member, complete=True).answers()  # as the file holds it, solver state and all
+        if member.path is not None:
+            save_envelope(member.finished, member.path)
+    return [member.finished for member in members if member.finished is not None]

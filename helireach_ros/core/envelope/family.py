@@ -3,7 +3,8 @@
 A flight manual states the conditions its H-V diagram holds for (gross weight, density altitude). A family is what
 ``helireach envelope compute --weights-lb … --density-altitude-ft … --out FOLDER`` writes: one envelope per
 combination and the index ``family.json`` (:data:`FAMILY_INDEX`: every member's conditions, file, SHA-256 and
-whether it is complete), rewritten as each member finishes, so ``--resume`` continues the family where it stopped.
+whether it is complete), rewritten when the members complete; the members are computed together
+(:func:`~helireach_ros.core.envelope.compute.compute_envelopes`), so ``--resume`` continues the family as a whole.
 
 At a member's conditions the family answers exactly as that member. Between members it answers from the
 neighbouring members, the two or four whose weights and density altitudes bracket the conditions, and takes the
@@ -149,7 +150,7 @@ def write_family_index(
 
 
 class FamilyIndexWriter:
-    """Keeps a sweep's family index: written before the first member is computed, rewritten as each completes. A
+    """Keeps a sweep's family index: written before the members are computed, rewritten as each is recorded complete. A
     resumed sweep keeps the members the folder's index already lists as complete (their files untouched)."""
 
     def __init__(
