@@ -261,13 +261,48 @@ def envelope_resolution(numbers: Mapping) -> str:
               "statuses that differ from the full grid", "load (1/5/15 min)"]  # fmt: skip
     return (
         f"Heights 0–800 ft × speeds 0–120 kt, `{numbers['airframe']}`, on {numbers['workers']} local worker "
-        "processes; each grid doubles the one before per axis; 3-D grids on the shipped file's climb axis "
+        "processes (rows naming another airframe: that airframe's diagram); each grid doubles the one before per "
+        "axis; 3-D grids on the shipped file's climb axis "
         f"({numbers['climb_rates_fpm']} ft/min). *Refined*: `helireach envelope compute --refine-levels L` "
         "(boundary-following refinement, [envelopes.md](../method/envelopes.md#boundary-following-refinement)); "
         "ratios against the full grid of the same run.\n\n"
         + _table(header, rows)
         + ("\n\nStatuses that differ:\n\n" + "\n".join(changes) if changes else "")
     )
+
+
+def family_scaling(numbers: Mapping) -> str:
+    members = ", ".join(f"{m['weight_lb']:g} lbf / DA {m['density_altitude_ft']:g} ft" for m in numbers["members"])
+    phases = "; ".join(
+        f"{name.strip('_').replace('_', ' ')}: {phase['tasks']} tasks, {_number(phase['sum_s'])} s, median "
+        f"{phase['median_s']:.2f} s, longest {phase['max_s']:.2f} s"
+        for name, phase in numbers["phases"].items()
+    )
+    builds = ", ".join(f"{seconds:.1f}" for seconds in numbers["planner_build_s"])
+    text = (
+        f"A family of {len(numbers['members'])} members ({members}), {numbers['grid']} "
+        f"({numbers['nodes_per_member']} nodes each), `{numbers['airframe']}`, computed in one process one task at "
+        f"a time: {_number(numbers['serial_wall_s'])} s, {numbers['tasks']} tasks in {numbers['rounds']} rounds "
+        f"({phases}); each member's planner took {builds} s to build.\n\n"
+    )
+    rows = [
+        [item["executor"], _number(item["per_task_ms"], 2), item["workers"], _number(item["one_after_another_s"]),
+         _number(item["together_s"]), f"{item['speedup']:.1f}×", f"{100 * item['efficiency']:.0f} %"]
+        for item in numbers["estimates"]
+    ]  # fmt: skip
+    text += _table(
+        ["scheduler cost per task (measured on)", "ms per task", "workers", "members one after another, s",
+         "members together, s", "together: speed-up on 1 worker", "of ideal"],
+        rows,
+    )  # fmt: skip
+    check = numbers.get("check")
+    if check:
+        text += (
+            f"\n\nCheck: the family computed together on {check['executor']} took {_number(check['measured_s'])} s "
+            f"against {_number(check['estimated_s'])} s estimated ({check['ratio']:.2f}×; statuses identical to the "
+            f"one-process run: {'yes' if check['identical_statuses'] else 'no'}; load {check['load']})."
+        )
+    return text
 
 
 def closed_loop_latency(numbers: Mapping) -> str:
@@ -548,6 +583,16 @@ PAGES = (
                 "boundary-following refinement computes instead: its solves, time and every status that differs "
                 "from the full grid.",
                 envelope_resolution,
+            ),
+            Section(
+                "family_scaling",
+                "Envelope families on a cluster",
+                "What a cluster of W workers would take for a family of envelopes, its members computed one after "
+                "another or together (`helireach envelope compute --weights-lb … --density-altitude-ft …` runs "
+                "them together), from every task's measured time, the executors' measured cost per task and each "
+                "worker building the members' planners, scheduled as a pool does; checked against a real run on 2 "
+                "local processes. A cluster's start-up and data transfer are not in it.",
+                family_scaling,
             ),
         ),
     ),
