@@ -1,17 +1,20 @@
 """How an envelope's cost grows with resolution, and what boundary-following refinement saves and changes.
 
 Run: nice -n 10 .venv/bin/python bench/envelope_resolution.py [--resolutions 21x13 41x25 81x49] [--levels 1 2]
-     [--resolutions-3d 41x25] [--climb-rates-fpm=-2000,-1500,-1000,-500,0,750,1500] [--workers 2] [--json]
+     [--resolutions-3d 41x25] [--climb-rates-fpm=-2000,-1500,-1000,-500,0,750,1500]
+     [--other-airframes oh58a_class s300c_class] [--other-resolutions 41x25] [--workers 2] [--json]
 
 For each grid (heights 0-800 ft x speeds 0-120 kt, level flight, the default airframe and settings) the complete
 ``helireach envelope compute`` pipeline runs on local worker processes: the full grid (brute force), then the same
 grid refined over each of ``--levels`` (``EnvelopeJob.refine_levels``; :mod:`helireach_ros.core.envelope.refinement`)
 where the grid's counts allow it. ``--resolutions-3d`` adds 3-D grids on the shipped file's climb-rate axis
-(``--climb-rates-fpm``, refined per climb slice). Each refined envelope is compared with its full grid node by node:
-its solves (sweep, cold re-checks, interior solves and boundary bisection), IPOPT seconds summed over workers and
-wall time as ratios to the full grid's in the same run, and every status that differs, split into *towards safe on
-the node's own replay-verified plan* (the full grid's plan for that node did not verify; the refined interior solve's
-did), *towards safe without one* (an optimistic miss the refinement must never make) and *towards not safe*.
+(``--climb-rates-fpm``, refined per climb slice). ``--other-airframes`` repeats the comparison on other airframes'
+diagrams (other shapes of boundary: where a refinement could miss a pocket) at ``--other-resolutions``. Each
+refined envelope is compared with its full grid node by node: its solves (sweep, cold re-checks, interior solves and
+boundary bisection), IPOPT seconds summed over workers and wall time as ratios to the full grid's in the same run,
+and every status that differs, split into *towards safe on the node's own replay-verified plan* (the full grid's plan
+for that node did not verify; the refined interior solve's did), *towards safe without one* (an optimistic miss the
+refinement must never make) and *towards not safe*.
 ``--json`` writes docs/results/data/envelope_resolution.json.
 """
 
@@ -86,6 +89,8 @@ def main() -> None:
     parser.add_argument("--resolutions-3d", nargs="*", default=["41x25"], help="HEIGHTSxSPEEDS, 3-D")
     parser.add_argument("--climb-rates-fpm", default=SHIPPED_CLIMB_RATES_FPM, help="the 3-D grids' climb axis")
     parser.add_argument("--levels", nargs="+", type=int, default=[1, 2], help="refinement levels to compare")
+    parser.add_argument("--other-airframes", nargs="*", default=["oh58a_class", "s300c_class"])
+    parser.add_argument("--other-resolutions", nargs="*", default=["41x25"], help="HEIGHTSxSPEEDS, 2-D")
     parser.add_argument("--workers", type=int, default=2)
     add_json_argument(parser)
     arguments = parser.parse_args()
@@ -96,18 +101,25 @@ def main() -> None:
     print(f"command: {record.command}; load average {record.load_before}")
     numbers: dict = {"airframe": airframe.name, "workers": arguments.workers, "grids": [],
                      "climb_rates_fpm": arguments.climb_rates_fpm}  # fmt: skip
-    grids = [(resolution, None) for resolution in arguments.resolutions]
-    grids += [(resolution, climb_rates) for resolution in arguments.resolutions_3d]
-    for resolution, climbs in grids:
+    grids = [(airframe, resolution, None) for resolution in arguments.resolutions]
+    grids += [(airframe, resolution, climb_rates) for resolution in arguments.resolutions_3d]
+    grids += [
+        (load_airframe(name), resolution, None)
+        for name in arguments.other_airframes
+        for resolution in arguments.other_resolutions
+    ]
+    for grid_airframe, resolution, climbs in grids:
         heights_count, speeds_count = (int(part) for part in resolution.split("x"))
         job = EnvelopeJob(
-            airframe, settings, 0.0,
+            grid_airframe, settings, 0.0,
             tuple(np.linspace(0.0, 800.0, heights_count) * FT), tuple(np.linspace(0.0, 120.0, speeds_count) * KT),
             climb_rates=climbs,
         )  # fmt: skip
         label = f"{resolution}{'' if climbs is None else f'x{len(climbs)} (3-D)'}"
+        if grid_airframe.name != airframe.name:
+            label += f", {grid_airframe.name}"
         full, entry = _compute(job, arguments.workers)
-        entry |= {"resolution": label, "refined": []}
+        entry |= {"resolution": label, "airframe": grid_airframe.name, "refined": []}
         print(
             f"  {label:>14} full grid: {entry['nodes']:5d} nodes, {entry['solves']:5d} solves "
             f"({entry['solves'] / entry['nodes']:.2f} per node), IPOPT {entry['ipopt_s']:.0f} s, wall "

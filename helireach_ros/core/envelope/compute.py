@@ -388,7 +388,7 @@ def _sweep_column(
 
 
 def _interior_node(job: EnvelopeJob, row: int, column: int, warm_start) -> tuple[str, tuple[int, int], _Solution]:
-    """Refinement: a node inside cells whose corners are all safe or unverified, solved once from its corners' mean
+    """Refinement: a node inside cells whose corners are all safe, solved once from its corners' mean
     solver state.
 
     The caller keeps the answer only if it is ``safe`` (the NLP's value ≤ 0 and the stored plan replay-verified).
@@ -1133,7 +1133,7 @@ def compute_envelopes(
                 step //= 2
                 interior = []
                 for index, state in enumerate(states):
-                    inside_safe, inside_unsafe = classify(state.codes(), step, (_SAFE, _UNVERIFIED), _UNSAFE)
+                    inside_safe, inside_unsafe = classify(state.codes(), step, (_SAFE,), _UNSAFE)
                     for row, column in zip(*np.nonzero(inside_unsafe), strict=True):
                         if (row, column) not in state.solutions:
                             state.infer_unsafe((int(row), int(column)), step)

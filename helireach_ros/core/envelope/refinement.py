@@ -5,12 +5,13 @@ on the lattice of every 2^L-th node (:func:`lattice`); then, level by level, the
 filled in. Each new node lies in one cell of the coarser lattice (a cell centre) or on the edge of one or two (an
 edge midpoint), and gets what its enclosing cells' corners say (:func:`classify`):
 
-- **every corner of every enclosing cell safe or unverified** (inside the NLP's safe set: an unverified node is one
-  whose NLP found a landing that its replay did not confirm) — ``interior``: the node is solved once, warm-started
-  from the mean of its own corners' solver states (:func:`corners`: the 2 ends of its edge, or the 4 corners of its
-  cell). The answer counts only if the NLP calls it safe *and* the stored plan lands within limits in the
-  independent replay, so an interior node is ``safe`` on its own replay-verified plan, never on its corners' word.
-  Otherwise it is solved by the full grid procedure;
+- **every corner of every enclosing cell safe** — ``interior``: the node is solved once, warm-started from the
+  mean of its own corners' solver states (:func:`corners`: the 2 ends of its edge, or the 4 corners of its cell).
+  The answer counts only if the NLP calls it safe *and* the stored plan lands within limits in the independent
+  replay, so an interior node is ``safe`` on its own replay-verified plan, never on its corners' word. Otherwise it
+  is solved by the full grid procedure. A cell with an ``unverified`` corner (the NLP found a landing that the replay
+  did not confirm) is not interior: where the replay misses, the nodes beside it miss too (half of such interior
+  solves did not verify on the OH-58A and S300C classes' diagrams, and each then cost the full procedure as well);
 - **every corner unsafe** — ``inferred unsafe``: no solve; the node is stored ``unsafe`` with the smallest of its
   corners' values (the conservative direction: it may only hide a safe pocket, never claim one);
 - **anything else** (corners that disagree, or failed or no-trim corners) — solved by the full grid
@@ -42,8 +43,7 @@ class NodeOrigin(enum.IntEnum):
     GRID = 0
     """The full grid procedure (sweep, cold re-check, boundary), as in an unrefined envelope."""
     INTERIOR = 1
-    """One warm solve inside cells whose corners are all safe or unverified, kept because its plan is safe and
-    replay-verified."""
+    """One warm solve inside cells whose corners are all safe, kept because its plan is safe and replay-verified."""
     INFERRED_UNSAFE = 2
     """No solve: inside cells whose corners are all unsafe, stored unsafe with the smallest corner value."""
 
@@ -94,7 +94,7 @@ def classify(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(interior, inferred_unsafe) masks over the whole grid for the nodes of the ``step`` lattice that are not on
     the 2·``step`` lattice, from the status codes of the 2·``step`` lattice's nodes in ``codes``: interior where
-    every enclosing cell's corners are in ``safe_codes`` (safe and unverified), inferred unsafe where all are
+    every enclosing cell's corners are in ``safe_codes`` (the envelope passes ``safe``), inferred unsafe where all are
     ``unsafe_code``.
 
     A node of the level in neither mask is solved by the full grid procedure.
