@@ -1071,12 +1071,14 @@ def compute_envelopes(
         return stack_slices(slices, member.job.climb_rates, dict(metadata_now, complete=complete))
 
     def save_partial(*, only_started: bool = False) -> None:
+        """Every running member's partial file (``only_started``: only of members with a node solved)."""
         for member in running:
-            if member.path is not None and not (only_started and not any(s.solutions for s in member.states)):
-                save_envelope(snapshot(member, complete=False), member.path)
+            if member.path is None or (only_started and not any(state.solutions for state in member.states)):
+                continue
+            save_envelope(snapshot(member, complete=False), member.path)
 
-    def checkpoint(force: bool = False) -> None:
-        if force or time.monotonic() - last_checkpoint[0] > CHECKPOINT_INTERVAL_S:
+    def checkpoint() -> None:
+        if time.monotonic() - last_checkpoint[0] > CHECKPOINT_INTERVAL_S:
             save_partial()
             last_checkpoint[0] = time.monotonic()
 
