@@ -10,9 +10,11 @@ import dataclasses
 import io
 import json
 import math
+import signal
 import subprocess
 import sys
 import zipfile
+from collections.abc import Callable
 
 import numpy as np
 import pytest
@@ -71,14 +73,14 @@ def assert_same_results(first: Envelope, second: Envelope) -> None:
     assert different == []
 
 
-def interrupt_cli(command: list[str], at_line: str) -> str:
-    """Runs ``command``, sends Ctrl-C when its stderr prints a line starting with ``at_line``; asserts it exits 130 as
-    interrupted and returns its stderr."""
+def interrupt_cli(command: list[str], at_line: str | Callable[[str], bool], signal_number: int = signal.SIGINT) -> str:
+    """Runs ``command``, sends ``signal_number`` (Ctrl-C) when its stderr prints a line starting with ``at_line`` (or
+    one ``at_line`` accepts); asserts it exits 130 as interrupted and returns its stderr."""
     process = subprocess.Popen(command, stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
     try:
         for line in process.stderr:  # plain log lines (not a terminal): one per finished task
-            if line.startswith(at_line):
-                process.send_signal(subprocess.signal.SIGINT)
+            if line.startswith(at_line) if isinstance(at_line, str) else at_line(line):
+                process.send_signal(signal_number)
                 break
         _, errors = process.communicate(timeout=120)
     finally:

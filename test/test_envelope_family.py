@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import signal
 import subprocess
 import sys
@@ -16,7 +15,7 @@ import numpy as np
 import pytest
 from diagnostic_msgs.msg import DiagnosticStatus
 from rclpy.parameter import Parameter
-from test_envelope import run_cli
+from test_envelope import interrupt_cli, run_cli
 from test_ros_nodes import Harness
 
 from helireach_ros.core.envelope.data import EnvelopeError, EnvelopeQuery, read_envelope_file
@@ -153,17 +152,9 @@ def test_a_family_sweep_stopped_midway_saves_every_member_and_resumes_to_the_sam
     folder = tmp_path / "stopped"
     command = [sys.executable, "-m", "helireach_ros.cli.main", "envelope", "compute", *GRID, *CONDITIONS,
                "--workers", "1", "--out", str(folder)]  # fmt: skip
-    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)  # fmt: skip
-    assert process.stderr is not None
-    seen = []
-    for line in process.stderr:  # the progress display's lines: stop once the sweep has solved a node
-        seen.append(line)
-        if line.startswith("sweep: ") and not line.startswith("sweep: 0/"):
-            os.killpg(process.pid, signal.SIGTERM)
-            break
-    rest = process.communicate(timeout=120)[1]
-    assert process.returncode == 130, "".join(seen) + rest
+    # stop once the sweep has solved a node (its progress line past 0)
+    rest = interrupt_cli(command, lambda line: line.startswith("sweep: ") and not line.startswith("sweep: 0/"),
+                         signal.SIGTERM)  # fmt: skip
     assert "continue with --resume" in rest
     files = [folder / member.file for member in read_family_index(folder)[1]]
     assert len(files) == 4 and all(read_envelope_file(f, allow_partial=True).complete is False for f in files)
