@@ -11,6 +11,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from helireach_ros.core.aircraft.state_index import StateIndex
+from helireach_ros.core.evidence.replay import replay_remainder
 from helireach_ros.core.flight.simulation import Scenario, SimulatedVehicle, load_scenario
 from helireach_ros.core.planning.planner import get_planner
 from helireach_ros.core.robustness.closed_loop import ClosedLoopSettings, fly_closed_loop, measured_state
@@ -33,6 +35,21 @@ def test_re_planning_lands_the_mismatched_vehicle_within_limits(demo_scenario, a
     assert result.touchdown.within_limits, result.touchdown.reason
     assert result.plans >= 20 and result.unsafe_plans == 0
     assert result.touchdown.descent_rate <= airframe.limits.max_descent_rate
+
+
+@pytest.mark.parametrize("latency", [0.05, 0.3])
+def test_the_planner_nodes_policy_lands_the_demo_for_every_noise_seed(
+    demo_scenario, airframe, settings, latency
+) -> None:
+    """The real-time demo's landing, made repeatable: its scenario flown with the planner node's policy (the
+    disturbance estimate, re-plans kept out) at a fixed latency (0.05 s: the demo's solves; 0.3 s: the uncertainty
+    set's worst), for the demo's noise seed and two more. The real-time demo's own rate: bench/demo_landings.py."""
+    planner = get_planner(airframe, settings)
+    for seed in (7, 8, 9):
+        vehicle = SimulatedVehicle(dataclasses.replace(demo_scenario, seed=seed), airframe, settings)
+        result = fly_closed_loop(vehicle, planner, ClosedLoopSettings(latency=latency))
+        assert result.touchdown.within_limits, (seed, result.touchdown.reason)
+        assert result.plans >= 20, (seed, result)
 
 
 def test_a_second_of_plan_latency_breaks_the_closed_loop(demo_scenario, airframe, settings) -> None:
@@ -134,3 +151,61 @@ def test_with_latency_compensation_a_re_plan_starts_where_the_vehicle_is_when_it
             abs(state[3] - np.interp(time + latency, times, heights)) / FT for time, state in replans
         )
     assert miss_ft[True] < 0.5 and miss_ft[False] > 5.0, miss_ft
+
+
+class _WorseReplans:
+    """The planner, except that from the ``first``-th re-plan on every re-plan answers with one converged but unsafe
+    plan: a real IPOPT solution for a far worse state, standing for a re-plan that converged to a far worse local
+    optimum than the plan being flown (seen in the real-time demo: value +0.77 a quarter second after -0.03)."""
+
+    def __init__(self, planner, worse_plan, first: int) -> None:
+        self.inner, self.worse_plan, self.first = planner, worse_plan, first
+        self.airframe, self.settings = planner.airframe, planner.settings
+        self.calls = 0
+
+    def plan(self, state, *arguments, **keywords):
+        self.calls += 1
+        if self.calls > self.first:  # the first call is the failure plan
+            return self.worse_plan
+        return self.inner.plan(state, *arguments, **keywords)
+
+
+def test_a_re_plan_that_is_not_safe_is_kept_out_while_the_current_plan_still_lands(airframe, settings) -> None:
+    """Exact model and sensors: after the 8th re-plan every re-plan is a converged but unsafe plan. Kept out (the
+    planner node's policy), the current plan is flown on, since its remainder replays within limits from every
+    measured state, and the vehicle lands; flown instead, those plans crash it."""
+    scenario = Scenario(name="exact", height=500 * FT, forward_speed=75 * KT)
+    planner = get_planner(airframe, settings)
+    failure_state = SimulatedVehicle(scenario, airframe, settings).state.copy()
+    low_and_slow = failure_state.copy()
+    low_and_slow[[StateIndex.HEIGHT, StateIndex.FORWARD_SPEED]] = (30 * FT, 20 * KT)  # the H-V diagram's avoid region
+    worse = planner.plan(low_and_slow)
+    assert worse.solver.success and not worse.safe, worse.status
+    results = {}
+    for keep in (True, False):
+        vehicle = SimulatedVehicle(scenario, airframe, settings)
+        policy = ClosedLoopSettings(latency=0.05, keep_landing_plan=keep)
+        results[keep] = fly_closed_loop(vehicle, _WorseReplans(planner, worse, first=8), policy)
+    kept, flown = results[True], results[False]
+    assert kept.touchdown.within_limits_to_contact, kept.touchdown.reason
+    assert kept.kept_out_plans == kept.unsafe_plans >= 20
+    assert flown.kept_out_plans == 0 and not flown.touchdown.within_limits
+
+
+def test_the_remainder_of_a_plan_flown_from_its_own_path_lands_as_the_plan(airframe, settings) -> None:
+    """replay_remainder from the state the plan's own replay reaches at τ integrates the same path from there: the same
+    touchdown and value; from a state 50 ft lower at τ the same controls do not land."""
+    scenario = Scenario(name="exact", height=500 * FT, forward_speed=75 * KT)
+    plan = get_planner(airframe, settings).plan(SimulatedVehicle(scenario, airframe, settings).state)
+    assert plan.safe
+    for elapsed in (0.0, 5.0, 15.0, 20.0):
+        index = int(np.searchsorted(plan.replay.times, elapsed))
+        at, state = float(plan.replay.times[index]), plan.replay.states[:, index]
+        remainder = replay_remainder(airframe, settings, plan, at, state, plan.disturbance)
+        assert remainder.lands_within_limits
+        assert remainder.value == pytest.approx(plan.replay.value, abs=1e-3)
+        assert at + remainder.touchdown_time == pytest.approx(plan.replay.touchdown_time, abs=0.02)
+        lower = state.copy()
+        lower[StateIndex.HEIGHT] -= 50 * FT
+        if lower[StateIndex.HEIGHT] > 0.0:
+            assert not replay_remainder(airframe, settings, plan, at, lower, plan.disturbance).lands_within_limits

@@ -21,6 +21,7 @@ from helireach_ros.core.policies.landing_supervisor import (
     TimerAction,
     deadline_due,
     fallback_after_failed_first_plan,
+    keeps_current_plan,
     replan_gate,
     replan_timer_action,
 )
@@ -29,6 +30,24 @@ from helireach_ros.core.policies.landing_supervisor import (
 def test_the_rules_load_without_ros() -> None:
     code = "import sys, helireach_ros.core.policies.landing_supervisor; sys.exit('rclpy' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], check=False).returncode == 0
+
+
+@pytest.mark.parametrize(("replan_safe", "for_site", "lands"), list(itertools.product([False, True], repeat=3)))
+def test_a_re_plan_is_kept_out_only_if_not_safe_while_the_current_plan_still_lands(
+    replan_safe: bool, for_site: bool, lands: bool
+) -> None:
+    """The current plan's replay is asked for only when it can matter (a re-plan not safe, no site)."""
+    asked = []
+
+    def current_lands_from_here() -> bool:
+        asked.append(True)
+        return lands
+
+    kept = keeps_current_plan(
+        replan_safe=replan_safe, for_site=for_site, current_lands_from_here=current_lands_from_here
+    )
+    assert kept == (not replan_safe and not for_site and lands)
+    assert bool(asked) == (not replan_safe and not for_site)
 
 
 @pytest.mark.parametrize(

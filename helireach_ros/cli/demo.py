@@ -69,6 +69,8 @@ class DemoResult:
         standby_plan: the standby plan record (the live plan published on the failure), or None.
         plans: every plan published for the failure.
         robust_verdicts: the planner's robust verdicts of the failure's plans (None: pending), in order.
+        replans_failed, replans_kept_out: re-plans that did not converge, and converged re-plans kept out (not safe
+            while the current plan still landed from their state); the current plan was flown on either way.
         log_path: the MCAP log.
         message_count: messages recorded.
         track: N × 2 (height m, speed m/s) flown.
@@ -83,7 +85,8 @@ class DemoResult:
         self.standby_plan: Any = None
         self.plans: list[Any] = []
         self.robust_verdicts: list[Any] = []  # RobustSummary (None: pending) of the failure's plans, in order
-        self.replans_failed = 0
+        self.replans_failed = 0  # re-plans that did not converge (the current plan was kept)
+        self.replans_kept_out = 0  # converged re-plans not safe while the current plan still landed (flown on)
         self.log_path: Path | None = None
         self.message_count = 0
         self.track = np.zeros((0, 2))
@@ -200,6 +203,9 @@ def run_demo(
             result.planned_weight = planner.episode_weight if planner.planner is not None else None
             result.file_gross_weight = planner.airframe.gross_weight if planner.planner is not None else math.nan
             supervisor = planner.supervisor
+            failure = supervisor.failure
+            if failure is not None:
+                result.replans_failed, result.replans_kept_out = failure.replans_failed, failure.replans_kept_out
             result.plans = [record for record in supervisor.published_plans if record.failure_id == 1]
             result.robust_verdicts = [summary for key, summary in planner.robust_verdicts if key[0] == 1]
             standby = [record for record in result.plans if supervisor.is_standby(record)]
@@ -346,7 +352,16 @@ def summary(result: DemoResult) -> str:
         if learnt is not None and np.any(learnt)
         else ""
     )
-    lines.append(f"  closed loop               : {replans} re-plans from the current state{error}")
+    unused = ", ".join(
+        text
+        for count, text in (
+            (result.replans_failed, f"{result.replans_failed} not converged"),
+            (result.replans_kept_out, f"{result.replans_kept_out} kept out (the current plan still landed)"),
+        )
+        if count
+    )
+    unused = f" ({unused})" if unused else ""
+    lines.append(f"  closed loop               : {replans} re-plans from the current state{unused}{error}")
     if result.robust_verdicts:
         final = next((summary for summary in reversed(result.robust_verdicts) if summary is not None), None)
         if final is None:

@@ -49,6 +49,7 @@ __all__ = [
     "not_replayed",
     "replay_controls",
     "replay_plan",
+    "replay_remainder",
     "segment_integrator",
     "segment_parameters",
 ]
@@ -228,6 +229,54 @@ def replay_controls(
         start[:, None],
     )
     return replay_plan(airframe, settings, start, decoded, disturbance)
+
+
+@dataclass(frozen=True)
+class _ControlFunction:
+    """A control function alone, as :func:`replay_controls` reads it."""
+
+    control_times: np.ndarray
+    control_values: np.ndarray
+    control_interpolation: str
+    time_to_land: float
+
+
+def replay_remainder(
+    airframe: Airframe,
+    settings: PlannerSettings,
+    plan: Any,
+    elapsed_s: float,
+    state: np.ndarray,
+    disturbance: np.ndarray | None = None,
+) -> ReplaySummary:
+    """The rest of a plan flown from a later measured state: its control function from ``elapsed_s`` on (the
+    control there included, times shifted to start at 0) replayed from ``state``, as :func:`replay_controls` judges
+    a landing. ``plan`` has ``control_times``, ``control_values``, ``control_interpolation`` and ``time_to_land``.
+
+    What the closed loop needs to compare a re-plan with the plan being flown: both from the same measured state,
+    in the same model and disturbance. A plan already past its end flies its last control (the replay's contact
+    search holds it).
+    """
+    times = np.asarray(plan.control_times, dtype=float)
+    values = np.asarray(plan.control_values, dtype=float)
+    elapsed = min(max(float(elapsed_s), 0.0), float(times[-1]))
+    later = times > elapsed + 1e-9
+    if str(plan.control_interpolation) == "zero_order_hold":
+        # piece k holds values[:, k] on [times[k], times[k + 1]); the piece flown at ``elapsed`` comes first
+        piece = min(int(np.searchsorted(times, elapsed, side="right")) - 1, values.shape[1] - 1)
+        remaining_values = values[:, max(piece, 0) :]
+        remaining_times = np.concatenate([[elapsed], times[later]])[: remaining_values.shape[1] + 1]
+    else:
+        now = control_function(times, values, "linear", np.array([elapsed]))
+        remaining_times = np.concatenate([[elapsed], times[later]])
+        remaining_values = np.column_stack([now, values[:, later]])
+    rest = _ControlFunction(
+        remaining_times - elapsed,
+        remaining_values,
+        str(plan.control_interpolation),
+        max(float(plan.time_to_land) - elapsed, float(remaining_times[-1] - elapsed)),
+    )
+    return replay_controls(airframe, settings, state, rest, disturbance)
 
 
 def replay_plan(

@@ -410,6 +410,7 @@ class FailureEpisode:
     replans: int = 0
     replans_failed: int = 0
     replans_skipped_no_rotor: int = 0  # re-plan ticks without a measured rotor speed (the current plan was kept)
+    replans_kept_out: int = 0  # converged re-plans not safe while the current plan still landed from their state
     deadline_handled: bool = False
     outcome: str = ""
     history: list[PublishedPlan] = field(default_factory=list)

@@ -451,7 +451,7 @@ def planner_health_report(
     if failure is not None:
         values.update(
             failure_active=failure.active, replans=failure.replans, replans_failed=failure.replans_failed,
-            replans_skipped_no_rotor=failure.replans_skipped_no_rotor,
+            replans_skipped_no_rotor=failure.replans_skipped_no_rotor, replans_kept_out=failure.replans_kept_out,
         )  # fmt: skip
         if failure.active and failure.replans_skipped_no_rotor and health.rotor_measured is False:
             problems.append("re-planning paused: no measured rotor speed (the current plan is kept)")

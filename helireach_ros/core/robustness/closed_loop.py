@@ -2,7 +2,8 @@
 
 After the failure the planner plans from the measured state, then re-plans every ``replan_period``
 from the current measurement, warm-started from its previous plan, until the vehicle is below
-``min_height`` or the current plan has less than ``min_remaining`` to go — the policy of
+``min_height`` or the current plan has less than ``min_remaining`` to go, and flying the current plan on when a
+re-plan is not safe but the current plan, replayed from the same state, still lands — the policy of
 :class:`~helireach_ros.ros.nodes.planner_node.LandingPlannerNode`
 (:mod:`helireach_ros.core.policies.landing_supervisor`). Each plan is indexed from the time of
 the measurement it starts from and reaches the vehicle ``latency`` seconds later (solve, transport),
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
@@ -27,9 +29,10 @@ from helireach_ros.core.aircraft.model import clip_rotor_speed_noise, state_from
 from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker, predict_state
 from helireach_ros.core.estimation.gross_weight import estimate_gross_weight
+from helireach_ros.core.evidence.replay import replay_remainder
 from helireach_ros.core.flight.simulation import ControlSchedule, Measurement, SimulatedVehicle, TouchdownReport
 from helireach_ros.core.planning.planner import LandingPlan, LandingPlanner, get_planner
-from helireach_ros.core.policies.landing_supervisor import plan_time_remaining, replanning_ends
+from helireach_ros.core.policies.landing_supervisor import keeps_current_plan, plan_time_remaining, replanning_ends
 
 __all__ = ["ClosedLoopResult", "ClosedLoopSettings", "fly_closed_loop", "measured_state"]
 
@@ -61,6 +64,9 @@ class ClosedLoopSettings:
         site: a landing site, (start, end) m along the track in the vehicle's distance coordinate (None: land
             anywhere). Every plan is made for it (a planner with the ``site`` objective), each re-plan for what is
             left of the way there from the measured distance.
+        keep_landing_plan: a converged re-plan that is not safe is kept out while the current plan, replayed from the
+            re-plan's state, still lands (:func:`~helireach_ros.core.policies.landing_supervisor.keeps_current_plan`);
+            on, as in the planner node.
     """
 
     replan_period: float = 0.25
@@ -73,6 +79,7 @@ class ClosedLoopSettings:
     compensate_latency: bool = False
     disturbance: DisturbanceSettings = field(default_factory=DisturbanceSettings)
     site: tuple[float, float] | None = None
+    keep_landing_plan: bool = True
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.replan_period) and self.replan_period > 0.0):
@@ -90,6 +97,7 @@ class ClosedLoopResult:
         plans: converged plans made (the first included).
         failed_plans: solves that did not converge (the vehicle kept its current plan).
         unsafe_plans: converged plans not called safe (value > 0 or the replay failed).
+        kept_out_plans: of those, re-plans kept out because the current plan still landed from their state.
         planned_gross_weight: N, the weight the plans were made for (the estimate with ``estimate_weight``).
         final_disturbance: the disturbance estimate of the last re-plan (zero without ``estimate_disturbance``).
         touchdown_distance: m along the track where the vehicle met the ground (its distance coordinate).
@@ -100,6 +108,7 @@ class ClosedLoopResult:
     plans: int
     failed_plans: int
     unsafe_plans: int
+    kept_out_plans: int = 0
     planned_gross_weight: float = math.nan
     final_disturbance: np.ndarray = field(default_factory=lambda: np.zeros(3))
     touchdown_distance: float = math.nan
@@ -137,6 +146,15 @@ def _flown_ahead(
     return ahead
 
 
+def _lands_from(
+    planner: LandingPlanner, current: tuple[float, LandingPlan], time: float, state: np.ndarray, disturbance: np.ndarray
+) -> bool:
+    """Whether the current plan (started at ``current[0]``), flown on from ``state`` at ``time``, still lands."""
+    start, plan = current
+    remainder = replay_remainder(planner.airframe, planner.settings, plan, time - start, state, disturbance)
+    return remainder.lands_within_limits
+
+
 def fly_closed_loop(
     vehicle: SimulatedVehicle, planner: LandingPlanner, settings: ClosedLoopSettings | None = None
 ) -> ClosedLoopResult:
@@ -162,7 +180,7 @@ def fly_closed_loop(
         vehicle.advance(max(vehicle.scenario.failure_time - vehicle.time, 0.0))
     pending: list[tuple[float, ControlSchedule]] = []  # (arrival time, schedule), in order
     current: tuple[float, LandingPlan] | None = None  # (time it starts from, plan)
-    plans = failed = unsafe = 0
+    plans = failed = unsafe = kept_out = 0
     tracker = DisturbanceTracker(planner.airframe, settings.disturbance)
     disturbance = np.zeros(3)
     replanning = True
@@ -193,13 +211,24 @@ def fly_closed_loop(
                         state, current[1].warm_start, initial_control=flying, reaction_delay_s=0.0,
                         disturbance=disturbance, touchdown_window=window,
                     )  # fmt: skip
-                if plan.solver.success:
+                if not plan.solver.success:
+                    failed += 1
+                else:
                     plans += 1
                     unsafe += not plan.safe
-                    current = (starts, plan)
-                    pending.append((now + settings.latency, ControlSchedule.from_plan(plan, starts)))
-                else:
-                    failed += 1
+                    if (
+                        current is not None
+                        and settings.keep_landing_plan
+                        and keeps_current_plan(
+                            replan_safe=plan.safe,
+                            for_site=window is not None,
+                            current_lands_from_here=partial(_lands_from, planner, current, starts, state, disturbance),
+                        )
+                    ):
+                        kept_out += 1
+                    else:
+                        current = (starts, plan)
+                        pending.append((now + settings.latency, ControlSchedule.from_plan(plan, starts)))
         next_tick = now + settings.replan_period
         while pending and pending[0][0] <= next_tick and not vehicle.landed:
             arrival, schedule = pending.pop(0)
@@ -211,5 +240,5 @@ def fly_closed_loop(
     where = float(vehicle.state[StateIndex.DISTANCE])
     on_site = None if settings.site is None else settings.site[0] <= where <= settings.site[1]
     return ClosedLoopResult(
-        vehicle.touchdown, plans, failed, unsafe, planner.airframe.gross_weight, disturbance, where, on_site
+        vehicle.touchdown, plans, failed, unsafe, kept_out, planner.airframe.gross_weight, disturbance, where, on_site
     )

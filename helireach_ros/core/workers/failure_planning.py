@@ -11,7 +11,9 @@ what it decides to publish comes back through a :class:`PlanSink` (the node's pu
   robust verification and the disturbance estimate start after it is published (off the failure path);
 - **a re-plan** from the current state, from the control being flown at the state's stamp (the flyable controls stay
   continuous), with no reaction delay, for the model plus what the last interval taught of its error
-  (:class:`~helireach_ros.core.estimation.disturbance.DisturbanceTracker`); a failed re-plan keeps the current plan;
+  (:class:`~helireach_ros.core.estimation.disturbance.DisturbanceTracker`); a failed re-plan keeps the current plan,
+  and so does a converged one that is not safe while the current plan's remainder, replayed from the same state, still
+  lands (:func:`~helireach_ros.core.policies.landing_supervisor.keeps_current_plan`);
 - **the deadline's fallback** when no plan is out in time (:func:`~helireach_ros.core.planning.fallback.fallback_plan`);
 - **the landing site**, fixed when the failure starts (the standby plan's, else the selection's). Without a standby
   plan on the site, the first plan lands anywhere (the site NLP is slower: the deadline is met by the compiled one)
@@ -38,9 +40,10 @@ import numpy as np
 from helireach_ros.core.aircraft.state_index import StateIndex
 from helireach_ros.core.estimation.disturbance import DisturbanceSettings, DisturbanceTracker
 from helireach_ros.core.estimation.weight_tracking import WeightChoice, ready_choice
+from helireach_ros.core.evidence.replay import replay_remainder
 from helireach_ros.core.policies.failure_episode import FailureEpisode
 from helireach_ros.core.policies.landing_sites import LandingSite, SiteSelection, site_values
-from helireach_ros.core.policies.landing_supervisor import LandingSupervisor, ReplanGate
+from helireach_ros.core.policies.landing_supervisor import LandingSupervisor, ReplanGate, keeps_current_plan
 from helireach_ros.core.policies.plan_status import PlannerHealth, SolverPoolHealth, StatusReport, planner_health_report
 from helireach_ros.core.policies.vehicle_readings import CurrentState, LatestReadings, RotorSource
 from helireach_ros.core.workers.live_scheduling import LiveScheduler, StandbyPlan
@@ -298,7 +301,8 @@ class FailurePlanner:
             self._sink.report(
                 "info",
                 f"failure #{failure.failure_id}: closed loop ends at {state[StateIndex.HEIGHT]:.2f} m, "
-                f"{decision.remaining:.2f} s to go ({failure.replans} re-plans, {failure.replans_failed} failed)",
+                f"{decision.remaining:.2f} s to go ({failure.replans} re-plans, {failure.replans_failed} failed, "
+                f"{failure.replans_kept_out} kept out)",
             )
             return
         previous = decision.previous
@@ -313,7 +317,28 @@ class FailurePlanner:
             reason = error or (f"solver {plan.solver.status}" if plan is not None else "no plan")
             self._sink.report("warning", f"re-plan failed ({reason}); keeping the current plan", throttle_s=1.0)
             return
+        elapsed_s = (stamp_ns - previous.stamp_ns) * 1e-9
+        if keeps_current_plan(
+            replan_safe=plan.safe,
+            for_site=plan.touchdown_window is not None or previous.plan.touchdown_window is not None,
+            current_lands_from_here=lambda: self._lands_from(previous.plan, elapsed_s, state, plan.disturbance),
+        ):
+            self.supervisor.replan_kept_out(failure)
+            self._sink.report(
+                "info",
+                f"failure #{failure.failure_id}: re-plan not safe (value {plan.value:+.2f}); the current plan still "
+                f"lands from this state: flying it on ({failure.replans_kept_out} kept out)",
+                throttle_s=1.0,
+            )
+            return
         self._sink.publish_plan(failure, plan, current, "previous_plan", replan=True, robust_pending=False)
+
+    def _lands_from(self, plan: LandingPlan, elapsed_s: float, state: np.ndarray, disturbance: np.ndarray) -> bool:
+        """Whether the rest of ``plan`` from ``elapsed_s`` on, flown from ``state`` in the episode's model with
+        ``disturbance``, lands within limits (its independent replay)."""
+        assert self.backend is not None  # a re-plan came from it
+        model = self.backend.model_for(self.episode_weight.gross_weight)
+        return replay_remainder(model, self.backend.settings, plan, elapsed_s, state, disturbance).lands_within_limits
 
     def deadline(self) -> None:
         """The deadline's fallback, if it is due now (once per failure)."""

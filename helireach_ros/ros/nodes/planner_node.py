@@ -300,7 +300,7 @@ class LandingPlannerNode(Node):
         fast_logging.warning(
             self.get_logger(),
             f"failure #{failure.failure_id}: episode {outcome.value}; planning stopped "
-            f"({failure.replans} re-plans, {failure.replans_failed} failed)",
+            f"({failure.replans} re-plans, {failure.replans_failed} failed, {failure.replans_kept_out} kept out)",
         )
 
     # -- timers -------------------------------------------------------------------------------------------------
