@@ -44,6 +44,7 @@ __all__ = [
     "summary",
     "summary_text",
     "utc_date",
+    "wilson_interval",
     "write_record",
 ]
 
@@ -71,6 +72,20 @@ def summary(values: Iterable[float], *, tails: bool = False) -> dict[str, float 
     result["max"] = float(data.max())
     result["n"] = int(data.size)
     return result
+
+
+def wilson_interval(successes: int, runs: int, z: float = 1.959964) -> tuple[float, float]:
+    """The Wilson score interval for a binomial proportion (95 % for the default z).
+
+    .. math:: \\frac{p + z^2/2n \\pm z\\sqrt{p(1-p)/n + z^2/4n^2}}{1 + z^2/n}
+    """
+    if runs == 0:
+        return 0.0, 1.0
+    p = successes / runs
+    centre = p + z * z / (2 * runs)
+    spread = z * math.sqrt(p * (1 - p) / runs + z * z / (4 * runs * runs))
+    scale = 1 + z * z / runs
+    return max(0.0, (centre - spread) / scale), min(1.0, (centre + spread) / scale)
 
 
 def summary_text(stats: Mapping[str, float | int | None], *, width: int = 6, unit: str = "ms", n: bool = True) -> str:
@@ -150,6 +165,7 @@ def loadavg_text() -> str:
 def git_commit() -> str:
     """``git rev-parse --short HEAD``, with ``-dirty`` when the working tree differs from it (generated results
     under ``docs/results/`` do not count); ``unknown`` outside a git checkout."""
+
     def git(*arguments: str) -> str:
         return subprocess.run(["git", *arguments], capture_output=True, text=True, cwd=REPOSITORY).stdout.strip()
 

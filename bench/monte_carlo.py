@@ -3,8 +3,8 @@
 Run: nice -n 10 .venv/bin/python bench/monte_carlo.py [--runs 200] [--first-seed 0 | --seeds S ...]
      [--workers 2] [--margins 0/0 0.25/0.02] [--uncertainty config/uncertainty.yaml] [--no-weight-check]
      [--policies none weight disturbance weight+disturbance ...] [--objectives terminal reach_avoid]
-     [--replan-periods 0.25 0.1] [--state-gains 1 0.5] [--disturbance-windows 0 8] [--planner-models nominal truth]
-     [--noise set none] [--truth-check] [--json]
+     [--replan-periods 0.25 0.1] [--replan-min-heights 0.5 0.3] [--state-gains 1 0.5] [--disturbance-windows 0 8]
+     [--planner-models nominal truth] [--noise set none] [--truth-check] [--json]
 
 Each run is the lock-step closed loop (:func:`~helireach_ros.core.robustness.closed_loop.fly_closed_loop`, the planner
 node's re-planning policy, every 0.25 s) of a vehicle whose true parameters, density altitude and plan
@@ -41,14 +41,19 @@ the steady flight before the failure (:mod:`helireach_ros.core.estimation.gross_
 c_d errors into that weight); ``disturbance``: re-plan for the model plus the disturbance accelerations
 learnt from each re-planning interval's prediction error (:mod:`helireach_ros.core.estimation.disturbance`);
 ``latency``: each re-plan starts from the current plan flown ahead in the model for the latency
-(:attr:`~helireach_ros.core.robustness.closed_loop.ClosedLoopSettings.compensate_latency`). ``--state-gains``: the
+(:attr:`~helireach_ros.core.robustness.closed_loop.ClosedLoopSettings.compensate_latency`); ``keep``: a re-plan that
+is not safe is kept out while the current plan, replayed from its state, still lands
+(:attr:`~helireach_ros.core.robustness.closed_loop.ClosedLoopSettings.keep_landing_plan`; the planner node's policy is
+``disturbance+keep``). ``--state-gains``: the
 disturbance estimate's state gain α (below 1 an α–β observer whose filtered state the plans start from).
 ``--disturbance-windows``: W, the disturbance estimate as the mean of the last W intervals' implied disturbances
 (:attr:`~helireach_ros.core.estimation.disturbance.DisturbanceSettings.window`; 0: the filter of gain
 ``--disturbance-gain``, the default); each is run with every other setting, on the same draws.
 
 Re-planning periods (``--replan-periods``): s between re-plans (the planner node's ``replan_period``); each is run
-with every objective, policy and margin setting, on the same draws.
+with every objective, policy and margin setting, on the same draws. ``--replan-min-heights``: m below which the closed
+loop stops re-planning and flies the current plan to the ground (the planner node's ``replan_min_height``; the
+``replan_min_remaining`` rule holds either way), likewise.
 
 Planner models (``--planner-models``): ``nominal`` (the planner keeps the airframe file's model, as the nodes do)
 or ``truth``, an oracle that plans with each run's true model (drawn parameters and density altitude) and still
@@ -75,7 +80,7 @@ from concurrent.futures import ProcessPoolExecutor
 from functools import lru_cache
 
 import numpy as np
-from _common import Record, add_json_argument, loadavg_text, summary
+from _common import Record, add_json_argument, loadavg_text, summary, wilson_interval
 
 from helireach_ros.core.aircraft.airframe import Airframe, load_airframe
 from helireach_ros.core.envelope.data import default_envelope_path, load_envelope
@@ -98,20 +103,6 @@ NEAR_BOUNDARY_MARGIN = (20.0, 30.0, 40.0)  # accepted low, target, accepted high
 DEEP_STATES = ((700.0, 40.0), (350.0, 110.0), (600.0, 90.0))  # ft, kt
 WEIGHT_CHECK_LATENCIES = (0.05, 0.1, 0.3)
 WEIGHT_CHECK_SEEDS = (7, 8, 9)
-
-
-def wilson_interval(successes: int, runs: int, z: float = 1.959964) -> tuple[float, float]:
-    """The Wilson score interval for a binomial proportion (95 % for the default z).
-
-    .. math:: \\frac{p + z^2/2n \\pm z\\sqrt{p(1-p)/n + z^2/4n^2}}{1 + z^2/n}
-    """
-    if runs == 0:
-        return 0.0, 1.0
-    p = successes / runs
-    centre = p + z * z / (2 * runs)
-    spread = z * math.sqrt(p * (1 - p) / runs + z * z / (4 * runs * runs))
-    scale = 1 + z * z / runs
-    return max(0.0, (centre - spread) / scale), min(1.0, (centre + spread) / scale)
 
 
 def initial_states() -> list[tuple[float, float, float]]:
@@ -171,7 +162,10 @@ def _context(uncertainty_file: str) -> tuple[Airframe, PlannerSettings, Uncertai
 PLANNER_MODELS = ("nominal", "truth")
 """``--planner-models``: the airframe file's model (as the nodes plan) or each run's true model (an oracle)."""
 
-POLICY_PARTS = {"weight": "estimate_weight", "disturbance": "estimate_disturbance", "latency": "compensate_latency"}
+POLICY_PARTS = {
+    "weight": "estimate_weight", "disturbance": "estimate_disturbance", "latency": "compensate_latency",
+    "keep": "keep_landing_plan",
+}  # fmt: skip
 """``--policies`` words and the :class:`ClosedLoopSettings` switch each turns on."""
 
 
@@ -196,14 +190,19 @@ def parse_policy(text: str) -> str:
 
 
 def closed_loop_settings(
-    policy: str, latency: float, disturbance_gain: float, replan_period: float = ClosedLoopSettings().replan_period,
-    state_gain: float = DisturbanceSettings().state_gain, disturbance_window: int | None = DisturbanceSettings().window,
+    policy: str,
+    latency: float,
+    disturbance_gain: float,
+    replan_period: float = ClosedLoopSettings().replan_period,
+    state_gain: float = DisturbanceSettings().state_gain,
+    disturbance_window: int | None = DisturbanceSettings().window,
+    min_height: float = ClosedLoopSettings().min_height,
 ) -> ClosedLoopSettings:
     """The re-planning policy of a run."""
     parts = [] if policy == "none" else policy.split("+")
     switches = {switch: part in parts for part, switch in POLICY_PARTS.items()}  # each one explicit
     return ClosedLoopSettings(
-        latency=latency, replan_period=replan_period,
+        latency=latency, replan_period=replan_period, min_height=min_height,
         disturbance=DisturbanceSettings(gain=disturbance_gain, state_gain=state_gain, window=disturbance_window),
         **switches,
     )  # fmt: skip
@@ -228,6 +227,7 @@ class Flight:
     planner_model: str = "nominal"
     state_gain: float = DisturbanceSettings().state_gain
     disturbance_window: int | None = DisturbanceSettings().window
+    replan_min_height: float = ClosedLoopSettings().min_height
 
 
 def _settings(flight: Flight) -> tuple[Airframe, PlannerSettings]:
@@ -248,7 +248,7 @@ def fly(flight: Flight) -> dict:
     started = time.perf_counter()
     policy = closed_loop_settings(
         flight.policy, flight.model.latency, flight.disturbance_gain, flight.replan_period, flight.state_gain,
-        flight.disturbance_window,
+        flight.disturbance_window, flight.replan_min_height,
     )  # fmt: skip
     result = fly_closed_loop(vehicle, planner, policy)
     report = result.touchdown
@@ -266,6 +266,7 @@ def fly(flight: Flight) -> dict:
         "plans": result.plans,
         "failed_plans": result.failed_plans,
         "unsafe_plans": result.unsafe_plans,
+        "kept_out_plans": result.kept_out_plans,
         "wall_s": time.perf_counter() - started,
     }
 
@@ -362,9 +363,12 @@ def report(
         print(f"{label} (limit {limit_values[key]:.0f}): {_distribution(stats)}")
     plans, unsafe = sum(r["plans"] for r in results), sum(r["unsafe_plans"] for r in results)
     failed, wall = sum(r["failed_plans"] for r in results), float(np.median([r["wall_s"] for r in results]))
-    numbers.update(plans=plans, unsafe_plans=unsafe, failed_plans=failed, wall_per_run_median_s=wall)
+    kept_out = sum(r["kept_out_plans"] for r in results)
+    numbers.update(
+        plans=plans, unsafe_plans=unsafe, kept_out_plans=kept_out, failed_plans=failed, wall_per_run_median_s=wall
+    )
     print(
-        f"plans {plans}, called not safe {unsafe}, solver failures {failed}; "
+        f"plans {plans}, called not safe {unsafe} ({kept_out} of them kept out), solver failures {failed}; "
         f"closed-loop wall per run median {wall:.1f} s"
     )
     print("success by half of each range (lower half | upper half): what the failures lean on")
@@ -452,12 +456,19 @@ def main() -> None:
         help="W: the disturbance estimate as the mean of the last W intervals (0: the filter of --disturbance-gain)",
     )  # fmt: skip
     parser.add_argument(
-        "--noise", nargs="+", choices=("set", "none"), default=["set"],
+        "--noise",
+        nargs="+",
+        choices=("set", "none"),
+        default=["set"],
         help="the uncertainty set's sensor noise or exact measurements (each is run with every other setting)",
     )
     parser.add_argument(
         "--planner-models", nargs="+", choices=PLANNER_MODELS, default=["nominal"],
         help="what the planner knows: the file's model or (an oracle) each run's true one",
+    )  # fmt: skip
+    parser.add_argument(
+        "--replan-min-heights", type=float, nargs="+", default=[ClosedLoopSettings().min_height],
+        help="m below which re-planning stops (each is run with every other setting)",
     )  # fmt: skip
     add_json_argument(parser)
     arguments = parser.parse_args()
@@ -485,14 +496,21 @@ def main() -> None:
     file_objective = _context(arguments.uncertainty)[1].objective
 
     def flights(
-        margin: Margin, policy: str, objective: str, replan_period: float, planner_model: str = "nominal",
-        state_gain: float = DisturbanceSettings().state_gain, noise: str = "set", window: int = 0,
+        margin: Margin,
+        policy: str,
+        objective: str,
+        replan_period: float,
+        planner_model: str = "nominal",
+        state_gain: float = DisturbanceSettings().state_gain,
+        noise: str = "set",
+        window: int = 0,
+        min_height: float = ClosedLoopSettings().min_height,
     ) -> list[Flight]:
         sensor_noise = uncertainty.sensor_noise if noise == "set" else SensorNoise()
         return [
             Flight(arguments.uncertainty, margin, *states[seed % len(states)][:2], draws[seed],
                    sensor_noise, noise_seeds[seed], policy, arguments.disturbance_gain, objective,
-                   replan_period, planner_model, state_gain, window or None)
+                   replan_period, planner_model, state_gain, window or None, min_height)
             for seed in seeds
         ]  # fmt: skip
 
@@ -506,23 +524,29 @@ def main() -> None:
         print(f"truth check of the {len(seeds)} draws: wall {time.perf_counter() - started:.0f} s")
     settings = itertools.product(
         arguments.noise, arguments.planner_models, [objective or file_objective for objective in arguments.objectives],
-        arguments.replan_periods, arguments.state_gains, arguments.disturbance_windows, arguments.policies,
-        arguments.margins,
+        arguments.replan_periods, arguments.replan_min_heights, arguments.state_gains, arguments.disturbance_windows,
+        arguments.policies, arguments.margins,
     )  # fmt: skip
-    for noise, planner_model, objective, replan_period, state_gain, window, policy, margin in settings:
+    for noise, planner_model, objective, replan_period, min_height, state_gain, window, policy, margin in settings:
         started = time.perf_counter()
         estimate = f"window {window}" if window else f"filter gain {arguments.disturbance_gain:g}"
         print(
-            f"\n== planner model {planner_model}, objective {objective}, a re-plan every {replan_period:g} s, "
+            f"\n== planner model {planner_model}, objective {objective}, a re-plan every {replan_period:g} s down to "
+            f"{min_height:g} m, "
             f"state gain {state_gain:g}, disturbance {estimate}, sensor noise {noise} =="
         )
-        flown = flights(margin, policy, objective, replan_period, planner_model, state_gain, noise, window)
+        flown = flights(margin, policy, objective, replan_period, planner_model, state_gain, noise, window, min_height)
         results = run_tasks(flown, arguments.workers)
         results = [{**truth, **result} for truth, result in zip(truths, results, strict=True)]
         setting = report(policy, margin, states, seeds, draws, results, airframe, uncertainty)
         setting.update(
-            objective=objective, replan_period_s=replan_period, planner_model=planner_model, state_gain=state_gain,
-            disturbance_window=window, sensor_noise=noise,
+            objective=objective,
+            replan_period_s=replan_period,
+            replan_min_height_m=min_height,
+            planner_model=planner_model,
+            state_gain=state_gain,
+            disturbance_window=window,
+            sensor_noise=noise,
         )
         setting["wall_s"] = time.perf_counter() - started
         numbers["settings"].append(setting)
