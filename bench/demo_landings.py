@@ -1,6 +1,6 @@
 """How often the real-time demo lands within limits: ``make demo``'s run, repeated, each in a fresh interpreter.
 
-Run: .venv/bin/python bench/demo_landings.py [--runs 20] [--params-file F ...] [--json]
+Run: .venv/bin/python bench/demo_landings.py [--runs 20] [--params-file F ...] [--site-ft START:END] [--json]
 
 The demo (:func:`~helireach_ros.cli.demo.run_demo`: scenario ``demo_500ft_75kt``, its 5 % drag mismatch and sensor
 noise, the nodes on the wall clock) is the same every run up to its timing: when each re-plan's state is read, how
@@ -8,6 +8,8 @@ long each solve takes, when its plan reaches the vehicle. The lock-step closed l
 (``bench/closed_loop_latency.py``, ``test_closed_loop.py``) fixes those and is deterministic; this bench measures the
 real-time system as a user runs it, on this machine and its load. Each run is one process (as ``make demo`` and
 ``test_ros_system`` run it) with DDS discovery on the local host off, so runs do not hear each other.
+``--site-ft`` flies the demo's landing-site variant (``helireach demo --site-ft``, as ``test_landing_sites_ros`` does:
+robust verification off): within limits then means on the site too.
 
 Prints, per run, the touchdown (descent rate, forward speed, the rotor's range in flight and at contact), the verdict
 and the closed loop's counts (re-plans, not converged, kept out); then the landing rate with its 95 % Wilson
@@ -31,14 +33,15 @@ from helireach_ros.core.units import FT, KT
 _RUN_TIMEOUT_S = 300.0
 
 
-def _one_demo(out: str, params_files: tuple[str, ...]) -> dict:
+def _one_demo(out: str, params_files: tuple[str, ...], site_ft: str | None) -> dict:
     """One demo run in this (fresh) process: its touchdown and closed-loop counts."""
     os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "OFF"
     from rclpy.context import Context
 
-    from helireach_ros.cli.demo import run_demo
+    from helireach_ros.cli.demo import demo_site, run_demo
 
-    result = run_demo(out, context=Context(), handle_signals=False, figures=False, params_files=params_files)
+    site = {} if site_ft is None else {"site": demo_site(site_ft), "robust_verification": False}
+    result = run_demo(out, context=Context(), handle_signals=False, figures=False, params_files=params_files, **site)
     touchdown = result.touchdown
     if touchdown is None:
         return {"landed": False, "within": False, "reason": "no touchdown before the demo's timeout"}
@@ -64,6 +67,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--params-file", action="append", default=[], help="extra ROS parameter file (repeatable)")
+    parser.add_argument("--site-ft", default=None, help="the landing-site variant: START:END ft along the track")
     add_json_argument(parser)
     arguments = parser.parse_args()
     record = Record.start()
@@ -75,7 +79,8 @@ def main() -> None:
             started = time.perf_counter()
             with ProcessPoolExecutor(max_workers=1, mp_context=context) as pool:
                 out = os.path.join(scratch, f"run{index}")
-                run = pool.submit(_one_demo, out, tuple(arguments.params_file)).result(timeout=_RUN_TIMEOUT_S)
+                task = pool.submit(_one_demo, out, tuple(arguments.params_file), arguments.site_ft)
+                run = task.result(timeout=_RUN_TIMEOUT_S)
             run["wall_s"] = time.perf_counter() - started
             run["load"] = loadavg_text()
             runs.append(run)
@@ -108,7 +113,8 @@ def main() -> None:
     if arguments.json:
         numbers = {
             "runs": len(runs), "within": within, "within_to_contact": to_contact, "wilson_95": [low, high],
-            "params_files": arguments.params_file, "per_run": runs, "distributions": distributions,
+            "params_files": arguments.params_file, "site_ft": arguments.site_ft, "per_run": runs,
+            "distributions": distributions,
         }  # fmt: skip
         record.write(numbers)
 

@@ -353,7 +353,9 @@ def demo_landings(numbers: Mapping) -> str:
     return (
         f"**{numbers['within']} of {runs_text}** runs landed within limits ({100 * low:.0f}–{100 * high:.0f} %, 95 % "
         f"Wilson interval); {numbers['within_to_contact']} of {runs_text} with the rotor judged until ground contact. "
-        f"Extra parameter files: {params}.\n\n" + _table(header, rows) + f"\n\n{_ROTOR_NOTE}"
+        f"Extra parameter files: {params}."
+        + (f" Landing site {numbers['site_ft']} ft (within limits also means on it)." if numbers.get("site_ft") else "")
+        + "\n\n" + _table(header, rows) + f"\n\n{_ROTOR_NOTE}"
     )
 
 
