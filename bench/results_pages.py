@@ -349,10 +349,9 @@ def demo_landings(numbers: Mapping) -> str:
     params = ", ".join(f"`{name}`" for name in numbers["params_files"]) or "none (the defaults)"
     header = ["run", "ft/s", "kt", "rotor in flight %", "rotor to contact %", "re-plans / not converged / kept out",
               "verdict", "load average"]  # fmt: skip
-    runs_text = f"{numbers['runs']}"
     return (
-        f"**{numbers['within']} of {runs_text}** runs landed within limits ({100 * low:.0f}–{100 * high:.0f} %, 95 % "
-        f"Wilson interval); {numbers['within_to_contact']} of {runs_text} with the rotor judged until ground contact. "
+        f"**{numbers['within']} of {len(runs)}** runs landed within limits ({100 * low:.0f}–{100 * high:.0f} %, 95 % "
+        f"Wilson interval); {numbers['within_to_contact']} of {len(runs)} with the rotor judged until ground contact. "
         f"Extra parameter files: {params}."
         + (f" Landing site {numbers['site_ft']} ft (within limits also means on it)." if numbers.get("site_ft") else "")
         + "\n\n" + _table(header, rows) + f"\n\n{_ROTOR_NOTE}"
