@@ -11,7 +11,8 @@ where the grid's counts allow it. ``--resolutions-3d`` adds 3-D grids on the shi
 (``--climb-rates-fpm``, refined per climb slice). ``--other-airframes`` repeats the comparison on other airframes'
 diagrams (other shapes of boundary: where a refinement could miss a pocket) at ``--other-resolutions``. Each
 refined envelope is compared with its full grid node by node: its solves (sweep, cold re-checks, interior solves and
-boundary bisection), IPOPT seconds summed over workers and wall time as ratios to the full grid's in the same run,
+boundary bisection; an interior node kept on its corners' mean plan costs a replay, not a solve, and is counted
+apart), IPOPT seconds summed over workers and wall time as ratios to the full grid's in the same run,
 and every status that differs, split into *towards safe on the node's own replay-verified plan* (the full grid's plan
 for that node did not verify; the refined interior solve's did), *towards safe without one* (an optimistic miss the
 refinement must never make) and *towards not safe*.
@@ -139,6 +140,8 @@ def main() -> None:
                 "wall_ratio": refined_entry["wall_s"] / entry["wall_s"],
                 "interior_solves": int(counters["interior_solves"]),
                 "interior_kept": int(counters["interior_kept"]),
+                "interior_replays": int(counters["interior_replays"]),
+                "interior_interpolated": int(counters["interior_interpolated"]),
                 "inferred_unsafe_nodes": int(counters["inferred_unsafe_nodes"]),
                 **_differences(full, refined),
             }
@@ -147,8 +150,10 @@ def main() -> None:
                 f"  {label:>14} {levels} level(s): {refined_entry['solves']:5d} solves "
                 f"({refined_entry['solve_ratio']:.2f}x), IPOPT {refined_entry['ipopt_s']:.0f} s "
                 f"({refined_entry['ipopt_ratio']:.2f}x), wall {refined_entry['wall_s']:.0f} s "
-                f"({refined_entry['wall_ratio']:.2f}x); interior {refined_entry['interior_kept']} of "
-                f"{refined_entry['interior_solves']} kept, {refined_entry['inferred_unsafe_nodes']} inferred unsafe; "
+                f"({refined_entry['wall_ratio']:.2f}x); interior: {refined_entry['interior_interpolated']} of "
+                f"{refined_entry['interior_replays']} on their corners' mean plan (replays, no solve), "
+                f"{refined_entry['interior_kept']} of {refined_entry['interior_solves']} solves kept; "
+                f"{refined_entry['inferred_unsafe_nodes']} inferred unsafe; "
                 f"differ: {len(refined_entry['towards_safe_verified'])} towards safe on their own verified plan, "
                 f"{len(refined_entry['towards_safe_unverified'])} towards safe without, "
                 f"{len(refined_entry['towards_not_safe'])} towards not safe; load {refined_entry['load']}"

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from test_envelope import interrupt_cli
 
+from helireach_ros.core.aircraft.model import trim_controls
 from helireach_ros.core.envelope.compute import EnvelopeJob, compute_envelope
 from helireach_ros.core.envelope.data import load_envelope
 from helireach_ros.core.envelope.grid import parse_range
@@ -44,7 +45,7 @@ def test_the_refined_grid_is_never_safer_than_the_full_grid_without_its_own_veri
     origin = refined.arrays[REFINEMENT_ARRAY]
     assert {int(NodeOrigin.INTERIOR), int(NodeOrigin.INFERRED_UNSAFE)} <= set(np.unique(origin).tolist())
     safer = (refined.status == "safe") & (full.status != "safe")
-    assert np.all(origin[safer] == NodeOrigin.INTERIOR)
+    assert np.all(np.isin(origin[safer], (NodeOrigin.INTERIOR, NodeOrigin.INTERPOLATED)))
     assert np.all(refined.arrays["verified"][refined.status == "safe"])
     assert _solves(refined) < _solves(full)
     assert refined.metadata["refinement"]["boundary_following_levels"] == 1
@@ -63,6 +64,30 @@ def test_every_interior_node_lands_on_its_own_stored_plan_in_the_replay(full_and
         assert start[3] == pytest.approx(refined.heights[row]) and start[1] == pytest.approx(refined.speeds[column])
         replay = replay_controls(planner.airframe, planner.settings, start, plan)
         assert replay.lands_within_limits, (row, column, replay.value)
+
+
+def test_a_fine_grid_keeps_interior_nodes_on_their_corners_mean_plan_where_it_lands(airframe, settings):
+    """10 ft x 2.5 kt apart (the 81 x 49 grid's spacing) in a safe region, the corners' mean plan lands from most
+    nodes' own states: those nodes are safe on it without a solve, each on a plan that starts from its own trim and
+    lands in the replay; the statuses are the full grid's."""
+    job = EnvelopeJob(airframe, settings, 0.0, parse_range("720:760:5", FT), parse_range("22.5:32.5:5", KT))
+    full, refined = compute_envelope(job), compute_envelope(dataclasses.replace(job, refine_levels=1))
+    assert np.array_equal(full.status, refined.status)
+    counters = refined.metadata["compute"]["counters"]
+    assert counters["interior_replays"] == counters["interior_interpolated"] + counters["interior_solves"]
+    assert counters["interior_interpolated"] > 0 and _solves(refined) < _solves(full)
+    planner = get_planner(airframe, settings)
+    interpolated = np.argwhere(refined.arrays[REFINEMENT_ARRAY] == NodeOrigin.INTERPOLATED)
+    assert len(interpolated) == counters["interior_interpolated"]
+    for row, column in interpolated:
+        assert refined.status[row, column] == "safe" and refined.arrays["verified"][row, column]
+        assert refined.arrays["iterations"][row, column] == 0
+        plan = refined.stored_plan(int(row), int(column))
+        start = refined.arrays["plan_initial_state"][row, column]
+        assert start[3] == pytest.approx(refined.heights[row]) and start[1] == pytest.approx(refined.speeds[column])
+        assert plan.control_values[:, 0] == pytest.approx(trim_controls(planner.airframe, start), rel=1e-6)
+        replay = replay_controls(planner.airframe, planner.settings, start, plan)
+        assert replay.lands_within_limits and replay.value == pytest.approx(refined.value[row, column], abs=1e-9)
 
 
 def test_inferred_nodes_are_unsafe_with_their_least_unsafe_corner_and_no_plan(full_and_refined):

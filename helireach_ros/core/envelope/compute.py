@@ -224,6 +224,7 @@ class _Solution:
     point_cpu_ms: float = 0.0  # the same in CPU time of the worker (less sensitive to other load; not stored)
     discarded_solve_ms: float = 0.0  # IPOPT time of a warm guess replaced by this cold solve (not stored)
     origin: int = NodeOrigin.GRID  # how a refined envelope's node got its answer (stored only when refined)
+    interpolation_replayed: bool = False  # a refinement replayed its corners' mean plan first (not stored)
 
     @property
     def conservatism(self) -> tuple[int, float]:
@@ -387,25 +388,106 @@ def _sweep_column(
     return "sweep", column, rows, solutions
 
 
-def _interior_node(job: EnvelopeJob, row: int, column: int, warm_start) -> tuple[str, tuple[int, int], _Solution]:
-    """Refinement: a node inside cells whose corners are all safe, solved once from its corners' mean
-    solver state.
+@dataclass(frozen=True)
+class _CornerMean:
+    """What a refinement's interior node takes from its corners: the mean of their solver states (a warm start)
+    and of their stored control functions (a candidate plan, float32 as stored)."""
 
-    The caller keeps the answer only if it is ``safe`` (the NLP's value ≤ 0 and the stored plan replay-verified).
-    """
-    solution = _solve_point(job, job.heights[row], job.speeds[column], warm_start)
-    return "interior", (row, column), dataclasses.replace(solution, origin=NodeOrigin.INTERIOR)
+    warm_start: Any  # planner.WarmStart
+    control_times: np.ndarray
+    control_values: np.ndarray
+    control_interpolation: str
 
 
-def _mean_warm_start(solutions: list[_Solution]):
-    """The mean of the solutions' stored solver states as a warm start (None if one has none)."""
+def _corner_mean(solutions: list[_Solution]) -> _CornerMean | None:
+    """The mean of the solutions' solver states and control functions (None if one has no NLP plan)."""
     from helireach_ros.core.planning.planner import WarmStart
 
     starts = [_warm_start_of(solution) for solution in solutions]
-    if any(start is None for start in starts):
+    times = [solution.control_times for solution in solutions if solution.control_times is not None]
+    values = [solution.control_values for solution in solutions if solution.control_values is not None]
+    if any(start is None for start in starts) or len(times) < len(solutions) or len(values) < len(solutions):
         return None
-    return WarmStart(*(np.mean([getattr(start, name) for start in starts], axis=0) for name in (
+    warm_start = WarmStart(*(np.mean([getattr(start, name) for start in starts], axis=0) for name in (
         "primal", "bound_multipliers", "constraint_multipliers")))  # fmt: skip
+    return _CornerMean(
+        warm_start,
+        np.mean(times, axis=0).astype(np.float32),
+        np.mean(values, axis=0).astype(np.float32),
+        solutions[0].control_interpolation,
+    )
+
+
+def _interpolated_point(job: EnvelopeJob, height: float, speed: float, mean: _CornerMean) -> _Solution | None:
+    """The node ``safe`` on its corners' mean plan, if that plan, replayed from the node's own state, lands within
+    limits (otherwise None; the caller solves).
+
+    The plan's first control is the node's own trim (the controls flown when the engine fails, where every NLP plan
+    starts). Not with a reaction delay (the plan's delay segment holds its own node's trim) or the legacy sweep.
+    """
+    from helireach_ros.core.aircraft.model import initial_state_after_failure, trim_controls
+    from helireach_ros.core.evidence.replay import StoredControls, replay_controls
+    from helireach_ros.core.planning.planner import get_planner
+
+    if job.legacy_sweep or job.settings.reaction_delay_s > 0.0:
+        return None
+    planner = get_planner(job.airframe, job.settings, job.codegen)
+    try:
+        state = initial_state_after_failure(job.airframe, height, speed, job.power_fraction, climb_rate=job.climb_rate)
+    except ValueError:
+        return None
+    initial = state.as_array()
+    values = mean.control_values.copy()
+    values[:, 0] = trim_controls(planner.airframe, initial)
+    candidate = StoredControls(mean.control_times, values, mean.control_interpolation, float(mean.control_times[-1]))
+    replayed = replay_controls(planner.airframe, planner.settings, initial, candidate)
+    if not replayed.lands_within_limits:
+        return None
+    start = mean.warm_start
+    return _Solution(
+        status=_SAFE,
+        value=replayed.value,
+        time_to_land=candidate.time_to_land,
+        replay_value=replayed.value,
+        verified=True,
+        iterations=0,
+        solve_time_ms=0.0,
+        warm_started=False,
+        primal=start.primal.astype(np.float32),
+        bound_multipliers=_stored_bound_multipliers(start.bound_multipliers, job.settings.warm_start_bound_push),
+        constraint_multipliers=start.constraint_multipliers.astype(np.float32),
+        control_times=candidate.control_times,
+        control_values=candidate.control_values,
+        control_interpolation=candidate.control_interpolation,
+        initial_state=np.asarray(initial, np.float64),
+        origin=NodeOrigin.INTERPOLATED,
+    )
+
+
+def _interior_node(
+    job: EnvelopeJob, row: int, column: int, mean: _CornerMean
+) -> tuple[str, tuple[int, int], _Solution]:
+    """Refinement: a node inside cells whose corners are all safe. Its corners' mean plan, if it lands from the
+    node's own state (:func:`_interpolated_point`); otherwise one solve from its corners' mean solver state.
+
+    The caller keeps a solved answer only if it is ``safe`` (the NLP's value ≤ 0 and the stored plan
+    replay-verified).
+    """
+    height, speed = job.heights[row], job.speeds[column]
+    started, started_cpu = time.perf_counter(), time.process_time()
+    interpolated = _interpolated_point(job, height, speed, mean)
+    replay_ms, replay_cpu_ms = 1e3 * (time.perf_counter() - started), 1e3 * (time.process_time() - started_cpu)
+    if interpolated is not None:
+        solution = dataclasses.replace(interpolated, point_time_ms=replay_ms, point_cpu_ms=replay_cpu_ms)
+    else:
+        solved = _solve_point(job, height, speed, mean.warm_start)
+        solution = dataclasses.replace(
+            solved,
+            origin=NodeOrigin.INTERIOR,
+            point_time_ms=solved.point_time_ms + replay_ms,
+            point_cpu_ms=solved.point_cpu_ms + replay_cpu_ms,
+        )
+    return "interior", (row, column), dataclasses.replace(solution, interpolation_replayed=True)
 
 
 def _cold_check(job: EnvelopeJob, row: int, column: int) -> tuple[str, tuple[int, int], _Solution]:
@@ -561,7 +643,8 @@ class _EnvelopeState:
             ("sweep_solves", "sweep_warm_solves", "sweep_warm_from_not_safe", "sweep_guesses_replaced_cold",
              "cold_rechecks", "cold_rechecks_of_not_safe_starts", "cold_rechecks_changed_status",
              "rechecks_skipped_unsafe", "bisection_solves", "bisection_cold_solves", "no_trim_nodes",
-             "interior_solves", "interior_kept", "inferred_unsafe_nodes"),
+             "interior_replays", "interior_interpolated", "interior_solves", "interior_kept",
+             "inferred_unsafe_nodes"),
             0,
         )  # fmt: skip
         # per phase: IPOPT seconds and solve + decode + replay seconds summed over tasks (worker time)
@@ -618,14 +701,17 @@ class _EnvelopeState:
         self._account("cold re-check", cold.solve_time_ms, cold.point_time_ms, cold.point_cpu_ms)
 
     def set_interior(self, cell: tuple[int, int], solution: _Solution) -> None:
-        """Keeps a refinement's interior solve if it is safe (replay-verified); otherwise the node stays pending."""
-        self.counters["interior_solves"] += 1
+        """Keeps a refinement's interior node if it is safe (its plan replay-verified, interpolated or solved);
+        otherwise the node stays pending."""
+        self.counters["interior_replays"] += solution.interpolation_replayed
+        self.counters["interior_interpolated"] += solution.origin == NodeOrigin.INTERPOLATED
+        self.counters["interior_solves"] += solution.origin == NodeOrigin.INTERIOR
         self._account("interior", solution.solve_time_ms, solution.point_time_ms, solution.point_cpu_ms)
         if solution.status == _SAFE:
             self.solutions[cell] = solution
-            # one warm solve whose plan lands in the replay is the node's evidence: not re-checked cold
+            # a plan of its own that lands in the replay is the node's evidence: not re-checked cold
             self.cold_checked[cell] = True
-            self.counters["interior_kept"] += 1
+            self.counters["interior_kept"] += solution.origin == NodeOrigin.INTERIOR
 
     def infer_unsafe(self, cell: tuple[int, int], step: int) -> None:
         """A refinement's node inside cells whose corners are all unsafe: unsafe without a solve."""
@@ -1143,9 +1229,9 @@ def compute_envelopes(
                         cell = (int(row), int(column))
                         if cell in state.solutions:  # a resumed run's
                             continue
-                        start = _mean_warm_start([state.solutions[corner] for corner in corners(*cell, step)])
-                        if start is not None:  # a corner decided without the NLP: the full procedure
-                            interior.append((index, state.job, *cell, start))
+                        mean = _corner_mean([state.solutions[corner] for corner in corners(*cell, step)])
+                        if mean is not None:  # a corner decided without the NLP: the full procedure
+                            interior.append((index, state.job, *cell, mean))
                 run_phase(
                     "interior", _interior_node, interior,
                     lambda item: 1, lambda state, result: state.set_interior(result[1], result[2]),

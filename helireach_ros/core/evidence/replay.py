@@ -45,6 +45,7 @@ __all__ = [
     "CONTACT_SEARCH_S",
     "NOT_REPLAYED",
     "ReplaySummary",
+    "StoredControls",
     "control_function",
     "not_replayed",
     "replay_controls",
@@ -232,7 +233,7 @@ def replay_controls(
 
 
 @dataclass(frozen=True)
-class _ControlFunction:
+class StoredControls:
     """A control function alone, as :func:`replay_controls` reads it."""
 
     control_times: np.ndarray
@@ -270,7 +271,7 @@ def replay_remainder(
         now = control_function(times, values, "linear", np.array([elapsed]))
         remaining_times = np.concatenate([[elapsed], times[later]])
         remaining_values = np.column_stack([now, values[:, later]])
-    rest = _ControlFunction(
+    rest = StoredControls(
         remaining_times - elapsed,
         remaining_values,
         str(plan.control_interpolation),
