@@ -21,7 +21,7 @@ import pytest
 
 from helireach_ros.core.aircraft.airframe import load_airframe
 from helireach_ros.core.aircraft.model import initial_state_after_failure
-from helireach_ros.core.envelope.compute import EnvelopeJob, _sweep_column, compute_envelope
+from helireach_ros.core.envelope.compute import EnvelopeJob, _checked, _Solution, _sweep_column, compute_envelope
 from helireach_ros.core.envelope.data import (
     FORMAT_NAME,
     FORMAT_VERSION,
@@ -694,3 +694,25 @@ def test_a_sweep_over_winds_writes_an_hv_diagram_per_wind_that_only_that_wind_ac
             assert (node.envelope is not None) == held
         finally:
             node.destroy_node()
+
+
+def test_a_warm_and_a_cold_answer_combine_to_safe_only_on_a_verified_plan_and_never_over_unsafe():
+    """:func:`_checked`: unsafe from either start wins; otherwise safe on whichever start's plan landed in the
+    replay (the cold one if both); a warm start from a not-safe plan is a guess that the cold answer replaces."""
+    codes = STATUS_CODES
+
+    def answer(status: str, value: float, *, warm: bool = False, guess: bool = False) -> _Solution:
+        safe = status == "safe"
+        return _Solution(codes[status], value, 10.0, value, safe, 20, 1.0, warm, warm_from_not_safe=guess)
+
+    warm_safe, cold_safe = answer("safe", -0.10, warm=True), answer("safe", -0.08)
+    warm_unverified, cold_unverified = answer("unverified", -0.12, warm=True), answer("unverified", -0.09)
+    warm_unsafe, cold_unsafe = answer("unsafe", 0.05, warm=True), answer("unsafe", 0.02)
+    assert _checked(warm_safe, cold_safe) is cold_safe
+    assert _checked(warm_safe, cold_unverified) is warm_safe
+    assert _checked(warm_unverified, cold_safe) is cold_safe
+    assert _checked(warm_unverified, cold_unverified) is cold_unverified  # the larger value
+    assert _checked(warm_safe, cold_unsafe) is cold_unsafe and _checked(warm_unsafe, cold_safe) is warm_unsafe
+    assert _checked(warm_unsafe, cold_unsafe) is warm_unsafe  # the larger value
+    guess = answer("safe", -0.10, warm=True, guess=True)
+    assert _checked(guess, cold_unverified) is cold_unverified and _checked(guess, cold_unsafe) is cold_unsafe

@@ -18,8 +18,8 @@ whether a safe landing is reachable from there. The work runs in three phases:
    ``replay_value`` is NaN and ``verified`` False; every node that may be ``safe`` is replayed.
 2. **Cold re-check.** Every warm-started node whose value is near 0 (``|J| < NEAR_ZERO_VALUE``) or
    whose status differs from a 4-neighbour is solved again cold (:func:`_checked`): ``unsafe`` from
-   either start wins, otherwise the cold answer decides — such a node is ``safe`` only with a
-   verified cold plan, so a warm start never carries an optimistic answer across the boundary. For
+   either start wins, otherwise the node is ``safe`` if either start's plan is replay-verified — so a
+   warm start never carries the NLP's word across the boundary, only a landing the replay checked. For
    a node started from a not-safe plan the cold answer decides alone (what the legacy sweep
    computes there). A node warm-started from a safe plan that answered ``unsafe`` is not re-solved:
    ``unsafe`` wins whatever the cold answer, so that solve cannot change the verdict.
@@ -239,13 +239,13 @@ def _more_conservative(first: _Solution, second: _Solution) -> _Solution:
 def _checked(warm: _Solution, cold: _Solution) -> _Solution:
     """Combines a warm-started answer with the cold answer for the same point.
 
-    An ``unsafe`` verdict from either start wins (the larger value if both); otherwise the cold
-    answer decides, so a point is ``safe`` only if the cold solve produced a verified plan — a warm
-    start can never make it safe. The one case where this keeps less than the strict "more
-    conservative of the two" is warm ``unverified``/``failed`` with cold ``safe``: both NLP answers
-    say a landing is reachable and the cold plan is independently verified, so ``safe`` is proven.
-    (Warm plans that ride the rotor-speed limit overshoot it between collocation points in the
-    replay more often than cold ones; the strict rule marked ~30 such proven-safe nodes unverified.)
+    An ``unsafe`` verdict from either start wins (the larger value if both). Otherwise the point is ``safe`` if
+    either start's plan lands within limits in the independent replay (the cold one if both), and otherwise the
+    more conservative of the two answers. A warm start never carries the NLP's word across the boundary: a ``safe``
+    point has a replay-verified plan of its own, whichever start found it, and no start that calls it unsafe —
+    the evidence a refinement's interior node rests on too. (Letting the cold answer decide alone marked
+    ``unverified`` the nodes whose warm plan landed and whose cold plan overshot the rotor limits between collocation
+    points, which the refinement's interior solves then called safe.)
 
     A warm answer started from a not-safe plan (``warm_from_not_safe``) is a guess: the cold answer
     decides alone, exactly as if the sweep had solved the node cold.
@@ -254,8 +254,9 @@ def _checked(warm: _Solution, cold: _Solution) -> _Solution:
         return cold
     if warm.status == _UNSAFE or cold.status == _UNSAFE:
         return _more_conservative(cold, warm)
-    if cold.status == _SAFE:
-        return cold
+    for answer in (cold, warm):
+        if answer.status == _SAFE:
+            return answer
     return _more_conservative(cold, warm)
 
 
@@ -569,7 +570,7 @@ def _bisect_edge(
             solves += 1
             if answer.status == _SAFE and (confirm_each or safe_end[2] is None):
                 if safe_end[2] is not None:
-                    answer = _checked(answer, solve(trial))
+                    answer = solve(trial)  # the boundary's points stand on cold answers
                     solves += 1
                     cold_solves += 1
                 if answer.status == _SAFE:
