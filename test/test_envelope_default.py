@@ -139,8 +139,9 @@ def test_a_sample_of_nodes_recomputes_to_the_stored_answers(shipped):
     planner = get_planner(airframe, load_settings())
     arrays = shipped.arrays
     warm, checked = arrays["warm_started"], arrays["cold_checked"]
+    hover_band = np.flatnonzero(~warm[:, 0] & (shipped.status[:, 0] == "unsafe"))  # solved cold, inside the band
     cold_nodes = [
-        (10, 0),  # 200 ft, hover: inside the band
+        (int(hover_band[0]), 0),
         *[tuple(int(i) for i in node) for node in np.argwhere(checked & ~warm & (shipped.status == "safe"))[:2]],
     ]
     # warm nodes whose predecessor's stored plan is still the one the sweep used (it was not re-solved cold)
