@@ -51,19 +51,21 @@ nlp-cache-sites: $(STAMP)
 
 # The benches behind docs/results/: each writes docs/results/data/<bench>.json (--json), one after another (the
 # numbers are times: never two at once), then bench/results_pages.py regenerates the pages from those records.
-# About an hour and a quarter on 2 cores, most of it the Monte Carlo (two objectives, 200 draws, each draw's own landing) and the
-# reach-avoid envelope slice of objective_statuses.py; replay_failures.py on a 9 x 7 grid (its default 17 x 13 takes
-# ~12 minutes).
+# About two hours on 2 cores, most of it the Monte Carlo (two objectives, two re-plan floors, 200 draws each, each
+# draw's own landing), the envelope grids of envelope_resolution.py and the reach-avoid envelope slice of
+# objective_statuses.py; replay_failures.py on a 9 x 7 grid (its default 17 x 13 takes ~12 minutes).
 bench: $(STAMP) nlp-cache
+	$(BIN)/helireach nlp-cache --objective reach_avoid  # objective_statuses and monte_carlo compare both compiled
 	$(BIN)/python bench/plan_latency.py --json
 	$(BIN)/python bench/failure_latency.py --json
 	$(BIN)/python bench/site_latency.py --json
 	$(BIN)/python bench/envelope_throughput.py --workers 1,2 --dask-local 2 --json
-	$(BIN)/python bench/envelope_resolution.py --json
+	$(BIN)/python bench/envelope_resolution.py --levels 1 2 4 --json
 	$(BIN)/python bench/replay_failures.py --heights 9 --speeds 7 --json
 	$(BIN)/python bench/closed_loop_latency.py --json
 	$(BIN)/python bench/objective_statuses.py --json
-	$(BIN)/python bench/monte_carlo.py --policies disturbance --objectives terminal reach_avoid --truth-check --json
+	$(BIN)/python bench/monte_carlo.py --runs 200 --policies disturbance+keep --objectives terminal reach_avoid \
+		--replan-min-heights 0.5 0.3 --truth-check --no-weight-check --json
 	$(BIN)/python bench/results_pages.py
 
 clean:

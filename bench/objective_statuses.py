@@ -2,6 +2,8 @@
 
 Run: nice -n 10 .venv/bin/python bench/objective_statuses.py [--heights 17] [--speeds 13] [--no-envelope]
      [--workers 2] [--json]
+     after ``helireach nlp-cache --objective reach_avoid`` (both objectives' NLPs compiled; the run says which ran
+     on which functions, and warns when only one was compiled)
 
 Two checks, one run:
 
@@ -44,6 +46,16 @@ def replay_grid(heights: int, speeds: int) -> dict:
     """Both objectives over the grid, cold; returns the compared statuses and times."""
     airframe, settings = load_airframe("uh60a_class"), load_settings(None)
     planners = {name: get_planner(airframe, settings.replace(objective=name)) for name in OBJECTIVES}
+    functions = {name: planner.nlp_functions for name, planner in planners.items()}
+    compiled = {name: description.startswith("compiled") for name, description in functions.items()}
+    for name in OBJECTIVES:
+        print(f"  {name:12} NLP on {functions[name]}")
+    if len(set(compiled.values())) > 1:
+        # compiled functions solve several times faster than plain ones: the ratio would measure that instead
+        print(
+            "  WARNING: one objective's NLP is compiled and the other's is not; build both with "
+            "'helireach nlp-cache --objective reach_avoid' for a solve-time ratio of the objectives"
+        )
     grid_heights = np.linspace(0.0, 800.0, heights)
     grid_speeds = np.linspace(0.0, 120.0, speeds)
     times: dict[str, list[float]] = {name: [] for name in OBJECTIVES}
@@ -84,6 +96,7 @@ def replay_grid(heights: int, speeds: int) -> dict:
         "states": heights * speeds, "counts": counts, "changed": changed,
         "solve_s": {name: summary(times[name]) for name in OBJECTIVES},
         "solve_time_ratio": {"summed": ratio_sum, "median": ratio_median},
+        "nlp_compiled": compiled,
         "worst_margin": summary(worst_margins) if worst_margins else {},
     }  # fmt: skip
 
