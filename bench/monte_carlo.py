@@ -15,7 +15,7 @@ set's sensor noise, after a total power loss from level trim. The planner keeps 
 
 Initial states: 500 ft / 75 kt; for each of 100, 200, 250, 300, 350, 400, 450 and 550 ft the slowest speed
 (1 kt steps) at least 30 ft/kt inside the boundary of the shipped envelope's level slice (``Envelope.margin``;
-kept only within 20-40 ft/kt: with the flyable envelope 100, 200 and 550 ft have none); three states deep
+kept only within 20-40 ft/kt: with the shipped envelope 100 ft has none); three states deep
 inside (700 ft / 40 kt, 350 ft / 110 kt, 600 ft / 90 kt).
 
 Margins (``--margins T/R``): the planner plans inside tightened limits (touchdown descent and forward
