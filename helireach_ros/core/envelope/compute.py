@@ -392,16 +392,15 @@ def _sweep_column(
 @dataclass(frozen=True)
 class _CornerMean:
     """What a refinement's interior node takes from its corners: the mean of their solver states (a warm start)
-    and of their stored control functions (a candidate plan, float32 as stored)."""
+    and of their stored control functions (a candidate plan, float32 as stored, landing at its last time)."""
 
     warm_start: Any  # planner.WarmStart
-    control_times: np.ndarray
-    control_values: np.ndarray
-    control_interpolation: str
+    controls: Any  # replay.StoredControls
 
 
 def _corner_mean(solutions: list[_Solution]) -> _CornerMean | None:
     """The mean of the solutions' solver states and control functions (None if one has no NLP plan)."""
+    from helireach_ros.core.evidence.replay import StoredControls
     from helireach_ros.core.planning.planner import WarmStart
 
     starts = [_warm_start_of(solution) for solution in solutions]
@@ -411,12 +410,12 @@ def _corner_mean(solutions: list[_Solution]) -> _CornerMean | None:
         return None
     warm_start = WarmStart(*(np.mean([getattr(start, name) for start in starts], axis=0) for name in (
         "primal", "bound_multipliers", "constraint_multipliers")))  # fmt: skip
-    return _CornerMean(
-        warm_start,
-        np.mean(times, axis=0).astype(np.float32),
-        np.mean(values, axis=0).astype(np.float32),
-        solutions[0].control_interpolation,
-    )
+    mean_times = np.mean(times, axis=0).astype(np.float32)
+    controls = StoredControls(
+        mean_times, np.mean(values, axis=0).astype(np.float32), solutions[0].control_interpolation,
+        float(mean_times[-1]),
+    )  # fmt: skip
+    return _CornerMean(warm_start, controls)
 
 
 def _interpolated_point(job: EnvelopeJob, height: float, speed: float, mean: _CornerMean) -> _Solution | None:
@@ -427,7 +426,7 @@ def _interpolated_point(job: EnvelopeJob, height: float, speed: float, mean: _Co
     starts). Not with a reaction delay (the plan's delay segment holds its own node's trim) or the legacy sweep.
     """
     from helireach_ros.core.aircraft.model import initial_state_after_failure, trim_controls
-    from helireach_ros.core.evidence.replay import StoredControls, replay_controls
+    from helireach_ros.core.evidence.replay import replay_controls
     from helireach_ros.core.planning.planner import get_planner
 
     if job.legacy_sweep or job.settings.reaction_delay_s > 0.0:
@@ -438,9 +437,9 @@ def _interpolated_point(job: EnvelopeJob, height: float, speed: float, mean: _Co
     except ValueError:
         return None
     initial = state.as_array()
-    values = mean.control_values.copy()
+    values = mean.controls.control_values.copy()
     values[:, 0] = trim_controls(planner.airframe, initial)
-    candidate = StoredControls(mean.control_times, values, mean.control_interpolation, float(mean.control_times[-1]))
+    candidate = dataclasses.replace(mean.controls, control_values=values)
     replayed = replay_controls(planner.airframe, planner.settings, initial, candidate)
     if not replayed.lands_within_limits:
         return None
